@@ -1,0 +1,81 @@
+"""Figures that only read results (arrays, rigs, histories) and write images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .render import draw_mesh
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save(fig, path: Path, formats=("png",)) -> list[Path]:
+    """Save a figure in each format (atomically per file) and close it."""
+    import io
+
+    from .atomic import atomic_write_bytes
+
+    paths = []
+    for fmt in formats:
+        buf = io.BytesIO()
+        fig.savefig(buf, format=fmt, dpi=150, bbox_inches="tight")
+        p = Path(path).with_suffix("." + fmt)
+        atomic_write_bytes(p, buf.getvalue())
+        paths.append(p)
+    _pyplot().close(fig)
+    return paths
+
+
+def shape_error_grid(template, truth, results: dict, names, path: Path, view="front"):
+    """Rows: shapes; columns: the true shape, then each result coloured by per-vertex error (cm)."""
+    plt = _pyplot()
+    cols = 1 + len(results)
+    fig, axes = plt.subplots(len(names), cols, figsize=(2.6 * cols, 2.9 * len(names)), squeeze=False)
+    errs = {k: np.linalg.norm(r.deltas - truth.deltas, axis=2) for k, r in results.items()}
+    vmax = max(float(np.percentile(e[truth.index(names)], 99.5)) for e in errs.values())
+    mapper = None
+    for row, name in enumerate(names):
+        i = truth.index([name])[0]
+        draw_mesh(axes[row, 0], truth.neutral + truth.deltas[i], truth.faces, view=view)
+        axes[row, 0].set_title(f"{name}\n(truth)", fontsize=8)
+        for col, (label, res) in enumerate(results.items(), start=1):
+            mapper = draw_mesh(axes[row, col], res.neutral + res.deltas[i], res.faces,
+                               values=errs[label][i], vmin=0.0, vmax=vmax, cmap="magma_r", view=view)
+            rms = float(np.sqrt((errs[label][i] ** 2).mean()))
+            axes[row, col].set_title(f"{label}\nRMS {rms:.3f}", fontsize=8)
+    if mapper is not None:
+        cb = fig.colorbar(mapper, ax=axes, fraction=0.02, pad=0.01)
+        cb.set_label("per-vertex error")
+    return save(fig, path)
+
+
+def demo_figures(folder: Path, template, person, results: dict) -> list[Path]:
+    """Renders of the two default faces and error maps of each result against the person's truth."""
+    plt = _pyplot()
+    folder.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 4, figsize=(12, 7))
+    for ax, (title, V) in zip(axes[0], [("template neutral", template.neutral),
+                                        ("template jawOpen", template.shape("jawOpen")),
+                                        ("template mouthSmile_L", template.shape("mouthSmile_L")),
+                                        ("template eyeBlink_L", template.shape("eyeBlink_L"))]):
+        draw_mesh(ax, V, template.faces)
+        ax.set_title(title, fontsize=9)
+    for ax, (title, V) in zip(axes[1], [("person neutral", person.neutral),
+                                        ("person jawOpen (truth)", person.shape("jawOpen")),
+                                        ("person mouthSmile_L (truth)", person.shape("mouthSmile_L")),
+                                        ("person eyeBlink_L (truth)", person.shape("eyeBlink_L"))]):
+        draw_mesh(ax, V, template.faces)
+        ax.set_title(title, fontsize=9)
+    paths = save(fig, folder / "default_faces")
+    names = ["jawOpen", "mouthSmile_L", "mouthPucker", "cheekPuff_R"]
+    paths += shape_error_grid(template, person, results, names, folder / "error_maps")
+    return paths

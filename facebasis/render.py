@@ -1,0 +1,79 @@
+"""Shaded mesh renders with matplotlib (no OpenGL): painter's algorithm over triangles.
+
+Used by the report code for faces and per-vertex error maps; reads arrays, never solves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+VIEWS = {"front": (0.0, 0.0), "left": (0.0, 60.0), "right": (0.0, -60.0), "below": (-35.0, 0.0)}
+
+
+def _rotation(elev_deg: float, azim_deg: float) -> np.ndarray:
+    e, a = np.radians(elev_deg), np.radians(azim_deg)
+    Ry = np.array([[np.cos(a), 0, -np.sin(a)], [0, 1, 0], [np.sin(a), 0, np.cos(a)]])
+    Rx = np.array([[1, 0, 0], [0, np.cos(e), -np.sin(e)], [0, np.sin(e), np.cos(e)]])
+    return Rx @ Ry
+
+
+def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vmax=None,
+              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72)):
+    """Draw a shaded mesh into a matplotlib axis (camera looks along -z after the view rotation).
+
+    Parameters
+    ----------
+    ax : matplotlib axis
+    V : (n, 3), F : (m, 3)
+    values : optional (n,) per-vertex scalars shown as colours (shading still applied)
+    view : a key of ``VIEWS`` or an (elevation, azimuth) pair in degrees
+    face_mask : optional (m,) bool, triangles to draw
+    highlight : optional (m,) bool, triangles drawn in red on top (e.g. intersecting ones)
+    crop : optional ((xmin, xmax), (ymin, ymax)) in view coordinates
+
+    Returns
+    -------
+    The PolyCollection, or a ScalarMappable for a colour bar when ``values`` is given.
+    """
+    import matplotlib.cm as cm
+    import matplotlib.colors as mcolors
+    from matplotlib.collections import PolyCollection
+
+    elev, azim = VIEWS[view] if isinstance(view, str) else view
+    P = np.asarray(V, float) @ _rotation(elev, azim).T
+    F = np.asarray(F)
+    keep = np.ones(len(F), bool) if face_mask is None else np.asarray(face_mask, bool)
+    tri = P[F]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
+    light = np.array([0.3, 0.4, 1.0])
+    light /= np.linalg.norm(light)
+    shade = 0.25 + 0.75 * np.abs(n @ light)
+    depth = tri[:, :, 2].mean(1)
+    if crop is not None:
+        (x0, x1), (y0, y1) = crop
+        c = tri.mean(1)
+        keep &= (c[:, 0] > x0) & (c[:, 0] < x1) & (c[:, 1] > y0) & (c[:, 1] < y1)
+    order = np.flatnonzero(keep)[np.argsort(depth[keep], kind="stable")]
+    if values is not None:
+        vals = np.asarray(values, float)[F].mean(1)
+        norm = mcolors.Normalize(vmin=np.min(vals) if vmin is None else vmin,
+                                 vmax=np.max(vals) if vmax is None else vmax)
+        mapper = cm.ScalarMappable(norm=norm, cmap=cmap)
+        rgb = mapper.to_rgba(vals)[:, :3]
+    else:
+        mapper = None
+        rgb = np.tile(np.asarray(color, float), (len(F), 1))
+    rgb = rgb * shade[:, None]
+    if highlight is not None:
+        hl = np.asarray(highlight, bool)
+        rgb[hl] = np.array([0.9, 0.05, 0.05])
+    coll = PolyCollection(tri[order][:, :, :2], facecolors=np.clip(rgb[order], 0, 1),
+                          edgecolors="none", linewidths=0, antialiased=False)
+    ax.add_collection(coll)
+    pts = tri[order][:, :, :2].reshape(-1, 2) if len(order) else P[:, :2]
+    ax.set_xlim(pts[:, 0].min(), pts[:, 0].max())
+    ax.set_ylim(pts[:, 1].min(), pts[:, 1].max())
+    ax.set_aspect("equal")
+    ax.axis("off")
+    return mapper if mapper is not None else coll

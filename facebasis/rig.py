@@ -1,0 +1,175 @@
+"""Blendshape rigs: a neutral mesh plus named per-vertex deltas in one topology.
+
+A rig folder is a directory of meshes sharing one topology: a neutral (``neutral.obj`` by default,
+or any name given, e.g. ICT-FaceKit's ``generic_neutral_mesh.obj``) and one mesh per blendshape,
+named by its file stem (``jawOpen.obj``). Files matching any ``exclude`` glob are ignored, so an
+ICT-FaceKit ``FaceXModel`` folder loads with ``exclude=("identity*",)``.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .atomic import atomic_directory
+from .errors import RigError, TopologyError
+from .meshio import MESH_SUFFIXES, read_mesh, write_mesh
+from .mesh import same_topology, validate_mesh, validate_vertices
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A delta blendshape rig.
+
+    Attributes
+    ----------
+    neutral : (n, 3) float64, the rest face ``S0`` (or ``B0``)
+    faces : (m, 3) int64
+    names : tuple of k shape names
+    deltas : (k, n, 3) float64, ``S_i - S0`` for each shape
+    """
+
+    neutral: np.ndarray
+    faces: np.ndarray
+    names: tuple[str, ...]
+    deltas: np.ndarray
+    source: str = field(default="rig", compare=False)
+
+    def __post_init__(self):
+        V, F = validate_mesh(self.neutral, self.faces, f"{self.source} neutral")
+        D = np.ascontiguousarray(self.deltas, dtype=np.float64)
+        names = tuple(str(s) for s in self.names)
+        if D.ndim != 3 or D.shape[1:] != V.shape:
+            raise TopologyError(
+                f"{self.source}: expected deltas of shape (k, {len(V)}, 3), found {D.shape}"
+            )
+        if len(names) != len(D):
+            raise RigError(f"{self.source}: expected {len(D)} shape names, found {len(names)}")
+        if len(set(names)) != len(names):
+            dup = sorted({s for s in names if names.count(s) > 1})
+            raise RigError(f"{self.source}: expected unique shape names, found duplicates {dup}")
+        if not np.isfinite(D).all():
+            k = int(np.flatnonzero(~np.isfinite(D).all(axis=(1, 2)))[0])
+            raise RigError(f"{self.source}: shape '{names[k]}' has NaN/inf deltas")
+        object.__setattr__(self, "neutral", V)
+        object.__setattr__(self, "faces", F)
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "deltas", D)
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.neutral)
+
+    @property
+    def n_shapes(self) -> int:
+        return len(self.names)
+
+    def index(self, names: Sequence[str], what: str = "shape names") -> np.ndarray:
+        """Indices of ``names``; :class:`RigError` listing the unknown ones and the known ones."""
+        lookup = {s: i for i, s in enumerate(self.names)}
+        unknown = [s for s in names if s not in lookup]
+        if unknown:
+            raise RigError(
+                f"{what}: unknown blendshape names {unknown}; expected names of {self.source}: "
+                f"{list(self.names)}"
+            )
+        return np.array([lookup[s] for s in names], dtype=np.int64)
+
+    def shape(self, name: str) -> np.ndarray:
+        """Absolute positions ``S0 + S_i`` of one shape, (n, 3)."""
+        return self.neutral + self.deltas[self.index([name])[0]]
+
+    def evaluate(self, weights: np.ndarray) -> np.ndarray:
+        """Positions ``S0 + sum_i w_i S_i`` for weights (k,) or (j, k) -> (n, 3) or (j, n, 3)."""
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape[-1] != self.n_shapes:
+            raise RigError(f"weights: expected {self.n_shapes} per expression, found {w.shape[-1]}")
+        return self.neutral + np.tensordot(w, self.deltas, axes=(-1, 0))
+
+    def with_neutral(self, neutral: np.ndarray, deltas: np.ndarray, source: str | None = None) -> "Rig":
+        """A rig of the same names and faces with another neutral and deltas."""
+        return Rig(neutral, self.faces, self.names, deltas, source or self.source)
+
+
+def _mesh_files(folder: Path, exclude: Sequence[str]) -> list[Path]:
+    files = []
+    for p in sorted(folder.iterdir()):
+        if not p.is_file() or p.suffix.lower() not in MESH_SUFFIXES:
+            continue
+        if any(fnmatch.fnmatch(p.name, g) or fnmatch.fnmatch(p.stem, g) for g in exclude):
+            continue
+        files.append(p)
+    return files
+
+
+def load_rig_folder(
+    folder: str | os.PathLike,
+    neutral: str = "neutral.obj",
+    exclude: Sequence[str] = (),
+) -> Rig:
+    """Load a rig folder: the neutral and one blendshape per other mesh file (sorted by name).
+
+    Raises
+    ------
+    RigError
+        The folder or its neutral is missing, or it holds no blendshape.
+    TopologyError
+        A shape's vertex count or faces differ from the neutral's (the file is named).
+    MeshError
+        A file is unreadable, empty, has NaN/inf coordinates or bad indices; the neutral also has
+        degenerate triangles.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise RigError(f"rig folder {folder}: expected a folder of meshes, found no such folder")
+    neutral_path = folder / neutral
+    if not neutral_path.is_file():
+        found = [p.name for p in _mesh_files(folder, ())][:10]
+        raise RigError(
+            f"rig folder {folder}: expected the neutral '{neutral}', found no such file "
+            f"(mesh files there: {found}); name it with --neutral"
+        )
+    V0, F0 = read_mesh(neutral_path, check_degenerate=True)
+    names, deltas = [], []
+    for p in _mesh_files(folder, exclude):
+        if p.resolve() == neutral_path.resolve():
+            continue
+        V, F = read_mesh(p)
+        if len(V) != len(V0):
+            raise TopologyError(f"{p}: expected {len(V0)} vertices as in {neutral_path}, found {len(V)}")
+        same_topology(F0, F, str(p), str(neutral_path))
+        names.append(p.stem)
+        deltas.append(V - V0)
+    if not names:
+        raise RigError(f"rig folder {folder}: expected blendshape meshes beside '{neutral}', found none")
+    return Rig(V0, F0, tuple(names), np.stack(deltas), source=str(folder))
+
+
+def write_rig_folder(out_dir: str | os.PathLike, rig: Rig, neutral_name: str | None = "neutral.obj") -> None:
+    """Write ``<shape>.obj`` (absolute positions) for every shape, plus the neutral, atomically."""
+    with atomic_directory(out_dir) as stage:
+        write_shapes(stage, rig, neutral_name)
+
+
+def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj") -> None:
+    """Write a rig's meshes into an existing (staging) folder."""
+    if neutral_name:
+        write_mesh(stage / neutral_name, rig.neutral, rig.faces)
+    for name, d in zip(rig.names, rig.deltas):
+        write_mesh(stage / f"{name}.obj", rig.neutral + d, rig.faces)
+
+
+def load_target_neutral(path: str | os.PathLike, template: Rig) -> np.ndarray:
+    """Read a target neutral and check it matches the template's topology."""
+    V, F = read_mesh(path, check_degenerate=True)
+    if len(V) != template.n_vertices:
+        raise TopologyError(
+            f"{path}: expected {template.n_vertices} vertices as in template {template.source}, found {len(V)}"
+        )
+    same_topology(template.faces, F, str(path), f"template {template.source}")
+    return validate_vertices(V, str(path))

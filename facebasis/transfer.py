@@ -1,0 +1,126 @@
+"""Deformation transfer of a blendshape rig onto a new neutral (Sumner & Popovic 2004).
+
+For template shape i the per-triangle deformation gradient is ``Q_i = A_i^S (A_0^S)^-1``
+(Sumner & Popovic eq. 4; seed 000 eq. 3 writes the transferred target frame as
+``A~_i = Q_i A_0^B``). The target shape is the mesh whose triangle edges best match the
+transferred edges ``Q_i e^B`` in least squares, with the translation fixed at anchor vertices:
+
+    min_d  sum_t sum_e || (E d)_{t,e} - (Q_{i,t} - I) e^B_{t,e} ||^2,   d = B_i - B_0,
+    d[a] = S_i[a] - S_0[a]  at the anchors a (still vertices of the template).
+
+Solving for the delta ``d`` rather than the positions keeps still regions exactly still.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError, TopologyError
+from .gradients import edge_columns_to_rows, frames_cm, triangle_frames
+from .mesh import validate_mesh, validate_vertices
+from .poisson import EdgePoisson, choose_anchors
+from .rig import Rig
+
+
+def template_motion(rig: Rig) -> np.ndarray:
+    """Largest displacement of every vertex over all shapes, (n,)."""
+    return np.sqrt((rig.deltas ** 2).sum(-1).max(0))
+
+
+def rig_anchors(rig: Rig) -> np.ndarray:
+    """Default anchors for a rig: its still vertices, plus one per component with none."""
+    scale = float(np.linalg.norm(np.ptp(rig.neutral, axis=0)))
+    return choose_anchors(rig.faces, rig.n_vertices, template_motion(rig), scale=scale)
+
+
+class DeformationTransfer:
+    """Stateful deformation transfer: precomputes frames and factors the solve once.
+
+    Parameters
+    ----------
+    template : Rig, the source rig ``S_0, S_1..S_k``
+    target_neutral : (n, 3) the target's neutral ``B_0`` in the template's topology
+    anchors : optional (a,) anchor vertices (default :func:`rig_anchors`)
+    extra_rows, extra_weight : optional additional rows for :class:`EdgePoisson` (virtual edges)
+
+    Examples
+    --------
+    >>> dt = DeformationTransfer(template, target_neutral)      # doctest: +SKIP
+    >>> target_rig = dt.transfer()                               # all shapes at once
+    """
+
+    def __init__(self, template: Rig, target_neutral: np.ndarray, anchors=None,
+                 extra_rows=None, extra_weight: float = 0.0):
+        B0 = validate_vertices(target_neutral, "target neutral", template.n_vertices)
+        validate_mesh(B0, template.faces, "target neutral")
+        self.template = template
+        self.target_neutral = B0
+        F = template.faces
+        self.template_frames = frames_cm(template.neutral, F)  # A_0^S, (3, 3, m)
+        A0_inv = np.linalg.inv(np.moveaxis(self.template_frames, -1, 0))  # (m, 3, 3)
+        self.target_frames = frames_cm(B0, F)  # A_0^B, (3, 3, m)
+        # M_t = (A_0^S)^-1 A_0^B[:, :2], so that Q_i A_0^B[:, :2] - A_0^B[:, :2] = (A_i^S - A_0^S) M
+        self._M = np.ascontiguousarray(np.moveaxis(A0_inv @ np.moveaxis(self.target_frames[:, :2], -1, 0), 0, -1))
+        self.anchors = rig_anchors(template) if anchors is None else np.asarray(anchors, dtype=np.int64)
+        self.poisson = EdgePoisson(F, template.n_vertices, self.anchors,
+                                   extra_rows=extra_rows, extra_weight=extra_weight)
+
+    def gradients(self, deltas: np.ndarray | None = None) -> np.ndarray:
+        """Deformation gradients ``Q_i = A_i^S (A_0^S)^-1`` of the template shapes, (k, m, 3, 3)."""
+        D = self.template.deltas if deltas is None else deltas
+        A0_inv = np.linalg.inv(np.moveaxis(self.template_frames, -1, 0))
+        return triangle_frames(self.template.neutral + D, self.template.faces) @ A0_inv
+
+    def transferred_frame_deltas(self, deltas: np.ndarray | None = None) -> np.ndarray:
+        """Seed 000 eq. 3: ``A~_i = Q_i A_0^B - A_0^B``, edge columns only, (k, 3, 2, m).
+
+        Computed as ``(A_i^S - A_0^S) M`` with ``M = (A_0^S)^-1 A_0^B[:, :2]`` precomputed, which
+        is the same quantity without forming ``Q``.
+        """
+        D = self.template.deltas if deltas is None else deltas
+        dA = frames_cm(self.template.neutral + D, self.template.faces)  # (k, 3, 3, m)
+        dA -= self.template_frames
+        # out[k, x, j, t] = sum_c dA[k, x, c, t] M[c, j, t]
+        return np.einsum("kxct,cjt->kxjt", dA, self._M, optimize=True)
+
+    def solve_frame_deltas(self, frame_deltas: np.ndarray, anchor_values: np.ndarray | None = None,
+                           extra_cols: np.ndarray | None = None) -> np.ndarray:
+        """Vertex deltas (k, n, 3) whose triangle edges best match frame edge columns (k, 3, 2, m)."""
+        k = frame_deltas.shape[0]
+        a_cols = None
+        if anchor_values is not None:  # (k, a, 3) -> (k*3, a)
+            a_cols = np.moveaxis(anchor_values, 2, 1).reshape(k * 3, -1)
+        out = self.poisson.solve_columns(edge_columns_to_rows(frame_deltas), a_cols, extra_cols)
+        return np.moveaxis(out.reshape(k, 3, -1), 1, 2)
+
+    def anchor_values(self, deltas: np.ndarray | None = None) -> np.ndarray:
+        """Template deltas at the anchors, (k, a, 3): zero at still vertices."""
+        D = self.template.deltas if deltas is None else deltas
+        return D[:, self.anchors]
+
+    def transfer(self, names=None) -> Rig:
+        """Transfer every template shape (or those named) onto the target neutral."""
+        idx = np.arange(self.template.n_shapes) if names is None else self.template.index(list(names))
+        if self.poisson.extra_rows is not None:
+            raise InputError("transfer with extra rows needs their targets: use the virtual-edge API")
+        D = self.template.deltas[idx]
+        out = self.solve_frame_deltas(self.transferred_frame_deltas(D), self.anchor_values(D))
+        return Rig(self.target_neutral, self.template.faces,
+                   tuple(self.template.names[i] for i in idx), out, source="deformation transfer")
+
+
+def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None) -> Rig:
+    """Transfer every blendshape of ``template`` onto ``target_neutral`` (one-off call).
+
+    Parameters
+    ----------
+    template : Rig with neutral ``S_0`` (n, 3), faces (m, 3) and deltas (k, n, 3)
+    target_neutral : (n, 3) ``B_0``, same topology and vertex order
+    anchors : optional anchor vertices fixing each component's translation
+
+    Returns
+    -------
+    Rig with neutral ``B_0`` and the transferred deltas ``B_i - B_0``; transferring onto
+    ``S_0`` itself returns the template's shapes.
+    """
+    return DeformationTransfer(template, target_neutral, anchors).transfer()

@@ -1,0 +1,87 @@
+"""The command line: transfer and demo, outputs and atomic failure."""
+
+import json
+
+import numpy as np
+import pytest
+
+from facebasis.cli import main
+from facebasis.default_face import default_person, default_template
+from facebasis.meshio import read_mesh, write_mesh
+from facebasis.rig import load_rig_folder, write_rig_folder
+
+
+@pytest.fixture
+def template_dir(tmp_path):
+    write_rig_folder(tmp_path / "template", default_template())
+    write_mesh(tmp_path / "person.obj", default_person().neutral, default_person().faces)
+    return tmp_path
+
+
+def test_transfer_cli_writes_every_shape(template_dir, capsys):
+    out = template_dir / "out"
+    assert main(["transfer", "--template", str(template_dir / "template"), "--target",
+                 str(template_dir / "person.obj"), "--out", str(out)]) == 0
+    names = default_template().names
+    assert sorted(p.stem for p in out.glob("*.obj")) == sorted(list(names) + ["neutral"])
+    V, F = read_mesh(out / "jawOpen.obj")
+    assert np.array_equal(F, default_template().faces)
+    rig = load_rig_folder(out)
+    from facebasis import deformation_transfer
+
+    ref = deformation_transfer(default_template(), default_person().neutral)
+    assert np.allclose(rig.deltas[rig.index(["jawOpen"])[0]], ref.deltas[ref.index(["jawOpen"])[0]], atol=1e-7)
+    assert "transferred 15 shapes" in capsys.readouterr().out
+
+
+def test_transfer_cli_bad_target_leaves_nothing(template_dir, capsys):
+    bad = template_dir / "bad.obj"
+    V, F = default_person().neutral, default_person().faces
+    write_mesh(bad, V[:-5], F[:100])
+    out = template_dir / "out"
+    code = main(["transfer", "--template", str(template_dir / "template"), "--target", str(bad), "--out", str(out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "bad.obj: expected 4497 vertices as in template" in err and "found 4492" in err
+    assert not out.exists()
+    assert not list(template_dir.glob(".out*"))  # no staging folder left behind
+
+
+def test_atomic_output_keeps_previous_result_on_failure(template_dir, monkeypatch):
+    out = template_dir / "out"
+    args = ["transfer", "--template", str(template_dir / "template"), "--target",
+            str(template_dir / "person.obj"), "--out", str(out)]
+    assert main(args) == 0
+    before = sorted(p.name for p in out.iterdir())
+    import facebasis.rig as rigmod
+
+    calls = {"n": 0}
+    real = rigmod.write_mesh
+
+    def failing(path, V, F):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError("disk full")
+        return real(path, V, F)
+
+    monkeypatch.setattr(rigmod, "write_mesh", failing)
+    with pytest.raises(OSError, match="disk full"):
+        main(args)
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert not list(template_dir.glob(".out*"))
+
+
+def test_cli_unknown_neutral_name(template_dir, capsys):
+    code = main(["transfer", "--template", str(template_dir / "template"), "--neutral", "generic.obj",
+                 "--target", str(template_dir / "person.obj"), "--out", str(template_dir / "o")])
+    assert code == 2
+    assert "expected the neutral 'generic.obj', found no such file" in capsys.readouterr().err
+
+
+def test_demo_quick(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--quick", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["template_vertices"] == default_template().n_vertices
+    assert (out / "figures" / "error_maps.png").stat().st_size > 10000
+    assert len(list((out / "transfer").glob("*.obj"))) == 16

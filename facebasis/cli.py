@@ -39,6 +39,68 @@ def cmd_transfer(args) -> int:
     return 0
 
 
+def _pair_of_floats(text: str, name: str) -> tuple[float, float]:
+    from .errors import InputError
+
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError as exc:
+        raise InputError(f"{name}: expected two numbers FIRST,LAST, found {text!r}") from exc
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2:
+        raise InputError(f"{name}: expected two numbers FIRST,LAST, found {text!r}")
+    return vals[0], vals[1]
+
+
+def cmd_rig(args) -> int:
+    from .atomic import atomic_directory, atomic_write_json
+    from .examples import load_examples, load_weights, parse_pairs, weights_to_json
+    from .generation import GenerationOptions, GenerationProblem, BlendshapeGenerator
+    from .meshio import write_mesh
+    from .rig import load_rig_folder, load_target_neutral, write_shapes
+    from .results import history_to_json
+
+    # everything is validated before any solving starts
+    options = GenerationOptions(iterations=args.iterations, alpha=_pair_of_floats(args.alpha, "--alpha"),
+                                lam=_pair_of_floats(args.lam, "--lambda"))
+    template = load_rig_folder(args.template, args.neutral, args.exclude)
+    target = load_target_neutral(args.target, template)
+    names, examples = load_examples(args.examples, template)
+    X0 = load_weights(args.weights, names, template.names)
+    problem = GenerationProblem(template, target, examples, X0, names, parse_pairs(args.exclusive))
+    print(f"template {template.n_shapes} shapes, {template.n_vertices} vertices; {len(names)} training "
+          f"expressions; {len(problem.exclusive)} exclusive pairs")
+    gen = BlendshapeGenerator(problem, options)
+
+    def progress(rec, total):
+        flag = "" if rec.ipopt_success else f"  [IPOPT: {rec.ipopt_status}]"
+        print(f"  iteration {rec.iteration}/{total}: alpha {rec.alpha:.3g} lambda {rec.lam:.3g} "
+              f"E_fit {rec.e_fit:.4g} E_reg {rec.e_reg:.4g} weight objective {rec.weight_objective:.6g} "
+              f"(IPOPT {rec.ipopt_iterations} it, {rec.basis_seconds + rec.weight_seconds:.2f} s){flag}", flush=True)
+
+    result = gen.run(progress)
+    with atomic_directory(args.out) as stage:
+        write_shapes(stage, result.rig, neutral_name=None)
+        write_mesh(stage / "neutral.obj", result.rig.neutral, result.rig.faces)
+        atomic_write_json(stage / "weights.json", weights_to_json(result.weights, names, template.names))
+        atomic_write_json(stage / "history.json", history_to_json(result, options, problem))
+        atomic_write_json(stage / "residuals.json", {
+            "threshold": options.missing_threshold,
+            "relative_residual": dict(zip(names, map(float, result.residuals))),
+            "missing": list(result.missing)})
+    failed = [h for h in result.history if not h.ipopt_success]
+    for h in failed:
+        print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was polished "
+              "exactly on its complementarity branch", file=sys.stderr)
+    for name in result.missing:
+        print(f"warning: training expression {name} keeps a relative residual of "
+              f"{result.residuals[names.index(name)]:.3f} > {options.missing_threshold}: the template "
+              "may lack a shape it needs (missing expression)", file=sys.stderr)
+    print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -60,6 +122,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target", required=True, help="target neutral mesh (.obj/.ply), template topology")
     p.add_argument("--out", required=True, help="output folder: <shape>.obj for every template shape")
     p.set_defaults(func=cmd_transfer)
+
+    p = sub.add_parser("rig", help="example-based blendshape generation (seed 000)")
+    _add_rig_folder_args(p)
+    p.add_argument("--target", required=True, help="target neutral mesh, template topology")
+    p.add_argument("--examples", required=True, help="folder of training expression meshes (names = file stems)")
+    p.add_argument("--weights", required=True, help='rough weights JSON: {"ex00": {"jawOpen": 0.8}}')
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--iterations", type=int, default=10, help="alternations (default 10)")
+    p.add_argument("--alpha", default="0.5,0.1", help="alpha schedule FIRST,LAST (default 0.5,0.1)")
+    p.add_argument("--lambda", dest="lam", default="100,10", help="lambda schedule FIRST,LAST (default 100,10)")
+    p.add_argument("--exclusive", nargs="*", default=[], metavar="SHAPE_A:SHAPE_B",
+                   help="mutually exclusive shape pairs (complementarity x_a x_b = 0)")
+    p.set_defaults(func=cmd_rig)
     return parser
 
 

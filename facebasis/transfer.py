@@ -71,15 +71,18 @@ class DeformationTransfer:
         A0_inv = np.linalg.inv(np.moveaxis(self.template_frames, -1, 0))
         return triangle_frames(self.template.neutral + D, self.template.faces) @ A0_inv
 
-    def transferred_frame_deltas(self, deltas: np.ndarray | None = None) -> np.ndarray:
+    def transferred_frame_deltas(self, deltas: np.ndarray | None = None, frame_deltas=None) -> np.ndarray:
         """Seed 000 eq. 3: ``A~_i = Q_i A_0^B - A_0^B``, edge columns only, (k, 3, 2, m).
 
         Computed as ``(A_i^S - A_0^S) M`` with ``M = (A_0^S)^-1 A_0^B[:, :2]`` precomputed, which
         is the same quantity without forming ``Q``.
         """
-        D = self.template.deltas if deltas is None else deltas
-        dA = frames_cm(self.template.neutral + D, self.template.faces)  # (k, 3, 3, m)
-        dA -= self.template_frames
+        if frame_deltas is None:
+            D = self.template.deltas if deltas is None else deltas
+            dA = frames_cm(self.template.neutral + D, self.template.faces)  # (k, 3, 3, m)
+            dA -= self.template_frames
+        else:  # precomputed A_i^S - A_0^S, (k, 3, 3, m)
+            dA = frame_deltas
         # out[k, x, j, t] = sum_c dA[k, x, c, t] M[c, j, t]
         return np.einsum("kxct,cjt->kxjt", dA, self._M, optimize=True)
 

@@ -1,0 +1,97 @@
+"""Training inputs of ``facebasis rig``: a folder of expression meshes and a weights JSON file.
+
+``WEIGHTS.json`` maps each example's file stem to its rough weights by shape name, e.g.
+``{"ex00": {"jawOpen": 0.8, "mouthSmile_L": 0.5}}``; shapes not named start at 0.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, RigError, TopologyError
+from .mesh import same_topology
+from .meshio import MESH_SUFFIXES, read_mesh
+from .rig import Rig
+
+
+def load_examples(folder: str | os.PathLike, template: Rig) -> tuple[tuple[str, ...], np.ndarray]:
+    """Read every mesh of ``folder`` (sorted by name); each must have the template's topology."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"examples folder {folder}: expected a folder of meshes, found no such folder")
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    if not files:
+        raise InputError(f"examples folder {folder}: expected .obj/.ply training expressions, found none")
+    names, meshes = [], []
+    for p in files:
+        V, F = read_mesh(p)
+        if len(V) != template.n_vertices:
+            raise TopologyError(f"{p}: expected {template.n_vertices} vertices as in template {template.source}, found {len(V)}")
+        same_topology(template.faces, F, str(p), f"template {template.source}")
+        names.append(p.stem)
+        meshes.append(V)
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"examples folder {folder}: expected one mesh per name, found several for {dup}")
+    return tuple(names), np.stack(meshes)
+
+
+def parse_weights(obj, example_names, shape_names, source: str = "weights") -> np.ndarray:
+    """Rough weights (m, k) from a ``{example: {shape: weight}}`` mapping, fully validated."""
+    if not isinstance(obj, dict):
+        raise InputError(f"{source}: expected a JSON object {{example: {{shape: weight}}}}, found {type(obj).__name__}")
+    missing = [n for n in example_names if n not in obj]
+    extra = [n for n in obj if n not in set(example_names)]
+    if missing:
+        raise InputError(f"{source}: expected weights for every example, found none for {missing}")
+    if extra:
+        raise InputError(f"{source}: found weights for examples that are not in the examples folder: {extra}")
+    lookup = {s: i for i, s in enumerate(shape_names)}
+    X = np.zeros((len(example_names), len(shape_names)))
+    for j, ex in enumerate(example_names):
+        row = obj[ex]
+        if not isinstance(row, dict):
+            raise InputError(f"{source}: {ex}: expected an object {{shape: weight}}, found {type(row).__name__}")
+        unknown = [s for s in row if s not in lookup]
+        if unknown:
+            raise RigError(f"{source}: {ex}: unknown blendshape names {unknown}; expected names of the template: "
+                           f"{list(shape_names)}")
+        for s, v in row.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise InputError(f"{source}: {ex}.{s}: expected a number in [0, 1], found {v!r}")
+            if not 0.0 <= v <= 1.0:
+                raise InputError(f"{source}: {ex}.{s}: expected a weight in [0, 1], found {v}")
+            X[j, lookup[s]] = float(v)
+    return X
+
+
+def load_weights(path: str | os.PathLike, example_names, shape_names) -> np.ndarray:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: expected a weights JSON file, found no such file")
+    try:
+        obj = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: expected valid JSON, found a parse error ({exc})") from exc
+    return parse_weights(obj, example_names, shape_names, str(path))
+
+
+def weights_to_json(X: np.ndarray, example_names, shape_names, drop_zero: bool = True) -> dict:
+    """``{example: {shape: weight}}`` (the weights file format); zeros are omitted by default."""
+    return {ex: {s: float(v) for s, v in zip(shape_names, row) if not (drop_zero and v == 0.0)}
+            for ex, row in zip(example_names, np.asarray(X))}
+
+
+def parse_pairs(specs) -> tuple[tuple[str, str], ...]:
+    """``["mouthLeft:mouthRight", ...]`` -> pairs of names."""
+    pairs = []
+    for spec in specs or ():
+        parts = str(spec).split(":")
+        if len(parts) != 2 or not all(parts):
+            raise InputError(f"--exclusive: expected SHAPE_A:SHAPE_B, found {spec!r}")
+        pairs.append((parts[0], parts[1]))
+    return tuple(pairs)

@@ -1,0 +1,393 @@
+"""Example-based facial blendshape generation (seed 000; digest: ``../shared/notes/method.md`` A).
+
+Given a template rig ``S_0, S_1..S_k``, a target neutral ``B_0``, training expressions ``T_1..T_m``
+of the target and rough weights ``x~``, alternate
+
+* the **basis step** (eq. 2-4): with weights fixed, for every triangle solve for the target
+  blendshapes' frame edge columns ``A_i^B`` (3 x 2)
+
+      E_fit = sum_j || A_j^T - A_0^B - sum_i x_ij A_i^B ||_F^2                      (eq. 2)
+      E_reg = sum_i w_i || A~_i - A_i^B ||_F^2                                     (eq. 3)
+      min  E_fit + alpha E_reg                                                      (eq. 4)
+
+  with ``A~_i`` the deformation transfer of template shape i and per-triangle weights
+  ``w_i = ((1 + s_i) / (mu + s_i))^sigma`` (mu = 0.1, sigma = 2); then reconstruct vertex deltas
+  from the edges with the factor-once :class:`~facebasis.poisson.EdgePoisson`;
+* the **weight step** (eq. 5): :class:`~facebasis.weights.WeightSolver` (CasADi + IPOPT, exact
+  polish).
+
+Per triangle the basis step is the k x k system ``(X X^T + alpha W) Y = X R + alpha W A~``; with
+m < k it is solved through the m x m Woodbury form, batched over all triangles with BLAS matrix
+products (no Python loop over triangles).
+
+Units of ``w_i``: the paper's ``s_i = ||A_i^S||`` is a length, so ``w_i`` would change with the
+mesh's units (cm vs m). facebasis uses by default the scale-free relative edge change
+``s_i = ||A_i^S||_F / ||A_0^S||_F`` over the frame's two edge columns (``weight_measure="relative"``);
+``"absolute"`` gives the paper's literal, unit-dependent form.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .gradients import frames_cm
+from .mesh import validate_vertices
+from .rig import Rig
+from .transfer import DeformationTransfer
+from .weights import WeightSolver, WeightSolution, eq5_objective
+
+
+# ----------------------------------------------------------------------------------------------
+# problem, options, result
+
+@dataclass(frozen=True)
+class GenerationProblem:
+    """Inputs of example-based generation.
+
+    Attributes
+    ----------
+    template : Rig, ``S_0`` and deltas ``S_i`` (k shapes)
+    target_neutral : (n, 3) ``B_0`` in the template's topology
+    examples : (m, n, 3) training expressions ``T_j`` (absolute positions)
+    initial_weights : (m, k) rough weights ``x~`` in [0, 1]
+    example_names : m names (e.g. file stems)
+    exclusive : pairs of shape names that are mutually exclusive (complementarity)
+    """
+
+    template: Rig
+    target_neutral: np.ndarray
+    examples: np.ndarray
+    initial_weights: np.ndarray
+    example_names: tuple[str, ...] = ()
+    exclusive: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self):
+        t = self.template
+        B0 = validate_vertices(self.target_neutral, "target neutral", t.n_vertices)
+        T = np.ascontiguousarray(self.examples, dtype=np.float64)
+        if T.ndim != 3 or T.shape[1:] != (t.n_vertices, 3):
+            raise InputError(f"examples: expected shape (m, {t.n_vertices}, 3), found {T.shape}")
+        if len(T) == 0:
+            raise InputError("examples: expected at least one training expression, found none")
+        names = tuple(self.example_names) or tuple(f"ex{j:02d}" for j in range(len(T)))
+        if len(names) != len(T):
+            raise InputError(f"example_names: expected {len(T)}, found {len(names)}")
+        bad = [names[j] for j in np.flatnonzero(~np.isfinite(T).all(axis=(1, 2)))]
+        if bad:
+            raise InputError(f"examples: expected finite coordinates, found NaN/inf in {bad}")
+        X = np.asarray(self.initial_weights, dtype=np.float64)
+        if X.shape != (len(T), t.n_shapes):
+            raise InputError(f"initial_weights: expected shape ({len(T)}, {t.n_shapes}), found {X.shape}")
+        if not np.isfinite(X).all():
+            raise InputError("initial_weights: expected finite values, found NaN/inf")
+        out = np.argwhere((X < 0) | (X > 1))
+        if len(out):
+            j, i = out[0]
+            raise InputError(
+                f"initial_weights: expected values in [0, 1], found {len(out)} outside, e.g. "
+                f"{names[j]}.{t.names[i]} = {X[j, i]:g}"
+            )
+        pairs = tuple((str(a), str(b)) for a, b in self.exclusive)
+        for a, b in pairs:
+            t.index([a, b], what=f"exclusive pair {a}:{b}")
+            if a == b:
+                raise InputError(f"exclusive pair {a}:{b}: expected two different shapes, found one twice")
+        object.__setattr__(self, "target_neutral", B0)
+        object.__setattr__(self, "examples", T)
+        object.__setattr__(self, "initial_weights", X)
+        object.__setattr__(self, "example_names", names)
+        object.__setattr__(self, "exclusive", pairs)
+
+    @property
+    def pair_indices(self) -> np.ndarray:
+        if not self.exclusive:
+            return np.zeros((0, 2), dtype=np.int64)
+        return np.array([self.template.index([a, b]) for a, b in self.exclusive])
+
+
+@dataclass(frozen=True)
+class GenerationOptions:
+    """Schedule and parameters (defaults: the paper's).
+
+    alpha and lambda go geometrically from their first to their last value over the iterations.
+    """
+
+    iterations: int = 10
+    alpha: tuple[float, float] = (0.5, 0.1)
+    lam: tuple[float, float] = (100.0, 10.0)
+    mu: float = 0.1
+    sigma: float = 2.0
+    weight_measure: str = "relative"
+    missing_threshold: float = 0.2
+    polish: bool = True
+    ipopt_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if int(self.iterations) < 1:
+            raise InputError(f"iterations: expected >= 1, found {self.iterations}")
+        for name in ("alpha", "lam"):
+            v = tuple(float(a) for a in getattr(self, name))
+            if len(v) != 2 or not all(np.isfinite(v)):
+                raise InputError(f"{name}: expected two finite values (first, last), found {getattr(self, name)}")
+            object.__setattr__(self, name, v)
+        if min(self.alpha) <= 0:
+            raise InputError(f"alpha: expected values > 0, found {self.alpha}")
+        if min(self.lam) < 0:
+            raise InputError(f"lambda: expected values >= 0, found {self.lam}")
+        if self.weight_measure not in ("relative", "absolute"):
+            raise InputError(f"weight_measure: expected 'relative' or 'absolute', found {self.weight_measure!r}")
+        if not (0 < self.mu < 1) or self.sigma < 0:
+            raise InputError(f"mu, sigma: expected 0 < mu < 1 and sigma >= 0, found {self.mu}, {self.sigma}")
+
+    def schedule(self) -> list[tuple[float, float]]:
+        n = int(self.iterations)
+        s = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+        a0, a1 = self.alpha
+        l0, l1 = self.lam
+        alphas = a0 * (a1 / a0) ** s
+        lams = l0 * (l1 / l0) ** s if min(l0, l1) > 0 else l0 + (l1 - l0) * s
+        return list(zip(alphas.tolist(), lams.tolist()))
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    iteration: int
+    alpha: float
+    lam: float
+    e_fit: float
+    e_reg: float
+    weight_objective: float
+    ipopt_objective: float
+    max_complementarity: float
+    max_bound_violation: float
+    ipopt_max_complementarity: float
+    ipopt_max_bound_violation: float
+    ipopt_status: str
+    ipopt_iterations: int
+    ipopt_success: bool
+    basis_seconds: float
+    weight_seconds: float
+
+
+@dataclass(frozen=True)
+class GenerationResult:
+    """Output of :func:`generate_blendshapes`.
+
+    rig : the generated target rig (neutral ``B_0``, deltas ``B_i``)
+    weights : (m, k) solved weights of the training expressions
+    history : one :class:`IterationRecord` per alternation
+    residuals : (m,) relative vertex residual ``||B_0 + B x_j - T_j|| / ||T_j - B_0||``
+    missing : names of training expressions whose residual exceeds the threshold
+    example_names, seconds
+    """
+
+    rig: Rig
+    weights: np.ndarray
+    history: tuple[IterationRecord, ...]
+    residuals: np.ndarray
+    missing: tuple[str, ...]
+    example_names: tuple[str, ...]
+    seconds: float
+    precompute_seconds: float
+
+    @property
+    def all_ipopt_succeeded(self) -> bool:
+        return all(h.ipopt_success for h in self.history)
+
+
+# ----------------------------------------------------------------------------------------------
+# pure functions of the method
+
+def regularisation_weights(template_frame_deltas, template_frames, mu=0.1, sigma=2.0, measure="relative"):
+    """Per-triangle regulariser weights of eq. 3, (m_tri, k).
+
+    ``w = ((1 + s) / (mu + s))^sigma`` with ``s = ||A_i^S||`` (``measure="absolute"``, the paper)
+    or ``s = ||A_i^S|| / ||A_0^S||`` (``"relative"``, scale-free), norms over the two edge columns.
+
+    Parameters
+    ----------
+    template_frame_deltas : (k, 3, 2, m_tri) edge columns of ``S_i``'s frames minus ``S_0``'s
+    template_frames : (3, 3, m_tri) frames of ``S_0``
+    """
+    s = np.sqrt((template_frame_deltas ** 2).sum(axis=(1, 2)))  # (k, m_tri)
+    if measure == "relative":
+        s = s / np.sqrt((template_frames[:, :2] ** 2).sum(axis=(0, 1)))
+    return (((1.0 + s) / (mu + s)) ** sigma).T
+
+
+def basis_step(X, R, A_tilde, w, alpha):
+    """Solve eq. 4 for every triangle at once.
+
+    Parameters
+    ----------
+    X : (k, m) weights, column j = x_j
+    R : (m, 6, m_tri) training frame deltas ``A_j^T - A_0^B`` (edge columns, flattened 3 x 2)
+    A_tilde : (k, 6, m_tri) deformation-transfer prior ``A~_i``
+    w : (m_tri, k) regulariser weights
+    alpha : regularisation weight (> 0)
+
+    Returns
+    -------
+    Y : (k, 6, m_tri) blendshape frame deltas ``A_i^B`` minimising ``E_fit + alpha E_reg``.
+
+    Notes
+    -----
+    Per triangle ``(X X^T + D) Y = X R + D A~`` with ``D = alpha diag(w_t)``. With m < k the
+    Woodbury identity ``(D + X X^T)^-1 = D^-1 - D^-1 X (I + X^T D^-1 X)^-1 X^T D^-1`` reduces each
+    triangle to an m x m solve; all contractions over k are single BLAS matrix products.
+    """
+    k, m = X.shape
+    m_tri = R.shape[-1]
+    dinv = (1.0 / (alpha * w)).T  # (k, m_tri)
+    XR = (X @ R.reshape(m, -1)).reshape(k, 6, m_tri)  # sum_j x_ij R_j
+    if m < k:
+        Gm = XR
+        Gm *= dinv[:, None, :]
+        Gm += A_tilde  # D^-1 (X R + D A~)
+        XtG = (X.T @ Gm.reshape(k, -1)).reshape(m, 6, m_tri)
+        # K_t = I + X^T D_t^-1 X for every triangle, from one product over the upper triangle of x x^T
+        iu, ju = np.triu_indices(m)
+        upper = dinv.T @ (X[:, iu] * X[:, ju])  # (m_tri, m(m+1)/2)
+        K = np.empty((m_tri, m, m))
+        K[:, iu, ju] = upper
+        K[:, ju, iu] = upper
+        K[:, np.arange(m), np.arange(m)] += 1.0
+        Z = np.linalg.solve(K, np.moveaxis(XtG, -1, 0))  # (m_tri, m, 6)
+        XZ = (X @ np.moveaxis(Z, 0, -1).reshape(m, -1)).reshape(k, 6, m_tri)
+        XZ *= dinv[:, None, :]
+        np.subtract(Gm, XZ, out=Gm)
+        return Gm
+    # m >= k: the direct k x k system per triangle
+    A = np.broadcast_to(X @ X.T, (m_tri, k, k)).copy()
+    A[:, np.arange(k), np.arange(k)] += alpha * w
+    rhs = XR + alpha * w.T[:, None, :] * A_tilde
+    return np.moveaxis(np.linalg.solve(A, np.moveaxis(rhs, -1, 0)), 0, -1)
+
+
+def basis_energies(X, R, A_tilde, w, Y):
+    """``E_fit`` (eq. 2) and ``E_reg`` (eq. 3) at blendshape frames Y, over edge columns."""
+    k, m = X.shape
+    fit = (X.T @ Y.reshape(k, -1)).reshape(R.shape)
+    fit -= R
+    e_fit = float(np.einsum("i,i->", fit.ravel(), fit.ravel()))
+    diff = A_tilde - Y
+    diff *= diff
+    e_reg = float(np.einsum("kt,kct->", w.T, diff))
+    return e_fit, e_reg
+
+
+# ----------------------------------------------------------------------------------------------
+# orchestration: problem -> precompute -> steps -> result
+
+class BlendshapeGenerator:
+    """Precomputes everything a run needs once: transfer (frames, factorisation), the
+    deformation-transfer prior, regulariser weights, training frame deltas and the CasADi solver.
+    """
+
+    def __init__(self, problem: GenerationProblem, options: GenerationOptions | None = None,
+                 virtual_edges=None):
+        t0 = time.perf_counter()
+        self.problem = problem
+        self.options = options or GenerationOptions()
+        opts = self.options
+        tpl = problem.template
+        F = tpl.faces
+        self.dt = DeformationTransfer(tpl, problem.target_neutral)
+        m_tri = len(F)
+        # template frame deltas A_i^S - A_0^S (k, 3, 3, m_tri), computed once for eq. 3's prior and w_i
+        dA = frames_cm(tpl.neutral + tpl.deltas, F)
+        dA -= self.dt.template_frames
+        # eq. 3 prior: A~_i = Q_i A_0^B - A_0^B = (A_i^S - A_0^S) (A_0^S)^-1 A_0^B
+        self.A_tilde = self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6, m_tri)
+        self.w = regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu, opts.sigma,
+                                        opts.weight_measure)
+        del dA
+        B0 = problem.target_neutral
+        T_frames = frames_cm(problem.examples, F)[:, :, :2] - self.dt.target_frames[:, :2]
+        self.R = np.ascontiguousarray(T_frames.reshape(len(problem.examples), 6, m_tri))
+        self.targets = (problem.examples - B0).reshape(len(problem.examples), -1)  # t_j, (m, 3n)
+        self.target_sq = (self.targets ** 2).sum(1)
+        self.pairs = problem.pair_indices
+        self.weight_solver = WeightSolver(tpl.n_shapes, len(problem.examples), self.pairs,
+                                          opts.ipopt_options, polish=opts.polish)
+        # anchors keep the template's delta (zero at still vertices), as deformation transfer does
+        self.anchor_values = self.dt.anchor_values()  # = deformation transfer's values there
+        self.precompute_seconds = time.perf_counter() - t0
+
+    def reconstruct(self, Y) -> np.ndarray:
+        k, _, m_tri = Y.shape
+        return self.dt.solve_frame_deltas(Y.reshape(k, 3, 2, m_tri), self.anchor_values)
+
+    def weight_step(self, deltas, lam, X0=None) -> WeightSolution:
+        B = deltas.reshape(len(deltas), -1)  # (k, 3n)
+        G = B @ B.T
+        C = B @ self.targets.T
+        return self.weight_solver.solve(G, C, self.target_sq, self.problem.initial_weights, lam, X0)
+
+    def run(self, progress=None) -> GenerationResult:
+        t_start = time.perf_counter()
+        p, opts = self.problem, self.options
+        X = p.initial_weights.copy()  # (m, k)
+        history = []
+        deltas = None
+        schedule = opts.schedule()
+        for it, (alpha, lam) in enumerate(schedule):
+            t0 = time.perf_counter()
+            Y = basis_step(X.T, self.R, self.A_tilde, self.w, alpha)
+            e_fit, e_reg = basis_energies(X.T, self.R, self.A_tilde, self.w, Y)
+            deltas = self.reconstruct(Y)
+            t1 = time.perf_counter()
+            sol = self.weight_step(deltas, lam, X0=X)
+            X = sol.weights
+            history.append(IterationRecord(
+                iteration=it + 1, alpha=alpha, lam=lam, e_fit=e_fit, e_reg=e_reg,
+                weight_objective=sol.objective, ipopt_objective=sol.ipopt_objective,
+                max_complementarity=sol.max_complementarity, max_bound_violation=sol.max_bound_violation,
+                ipopt_max_complementarity=sol.ipopt_max_complementarity,
+                ipopt_max_bound_violation=sol.ipopt_max_bound_violation, ipopt_status=sol.ipopt_status,
+                ipopt_iterations=sol.ipopt_iterations, ipopt_success=sol.ipopt_success,
+                basis_seconds=t1 - t0, weight_seconds=sol.seconds,
+            ))
+            if progress is not None:
+                progress(history[-1], len(schedule))
+        rig = Rig(p.target_neutral, p.template.faces, p.template.names, deltas, source="example-based generation")
+        residuals = relative_residuals(rig, p.examples, X)
+        missing = tuple(n for n, r in zip(p.example_names, residuals) if r > opts.missing_threshold)
+        return GenerationResult(rig=rig, weights=X, history=tuple(history), residuals=residuals, missing=missing,
+                                example_names=p.example_names, seconds=time.perf_counter() - t_start,
+                                precompute_seconds=self.precompute_seconds)
+
+
+def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``||B_0 + sum_i x_ij B_i - T_j|| / ||T_j - B_0||`` for every example, (m,)."""
+    fit = rig.evaluate(X)
+    num = np.linalg.norm((fit - examples).reshape(len(examples), -1), axis=1)
+    den = np.linalg.norm((examples - rig.neutral).reshape(len(examples), -1), axis=1)
+    return num / np.maximum(den, 1e-300)
+
+
+def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions | None = None,
+                         progress=None) -> GenerationResult:
+    """Example-based blendshape generation (seed 000): precompute, alternate, return the result."""
+    gen = BlendshapeGenerator(problem, options)
+    res = gen.run(progress)
+    return res
+
+
+def refit_weights(rig: Rig, expressions: np.ndarray, pairs=(), lam: float = 0.0, prior=None,
+                  solver: WeightSolver | None = None) -> WeightSolution:
+    """Fit weights of given expressions (m, n, 3) to a rig (eq. 5 with an optional prior)."""
+    T = (np.asarray(expressions, float) - rig.neutral).reshape(len(expressions), -1)
+    B = rig.deltas.reshape(rig.n_shapes, -1)
+    prior = np.zeros((len(T), rig.n_shapes)) if prior is None else prior
+    solver = solver or WeightSolver(rig.n_shapes, len(T), pairs)
+    return solver.solve(B @ B.T, B @ T.T, (T ** 2).sum(1), prior, lam)
+
+
+__all__ = ["GenerationProblem", "GenerationOptions", "GenerationResult", "IterationRecord", "BlendshapeGenerator",
+           "generate_blendshapes", "basis_step", "basis_energies", "regularisation_weights", "relative_residuals",
+           "refit_weights", "eq5_objective"]

@@ -1,0 +1,264 @@
+"""The weight step of example-based generation (seed 000, eq. 5), in CasADi, solved by IPOPT.
+
+For training expressions j = 1..m with target deltas ``t_j = T_j - B_0`` (3n,) and blendshape
+deltas ``B`` (3n, k), find weights ``x_j`` (k,) minimising
+
+    sum_j || B x_j - t_j ||^2 + lambda sum_j || x_j - x~_j ||^2          (eq. 5)
+    s.t.  0 <= x_ij <= 1,   x_aj * x_bj = 0  for every exclusive pair (a, b).
+
+Only Gram quantities enter: ``||B x - t||^2 = x^T G x - 2 c^T x + t^T t`` with ``G = B^T B``
+(k, k) and ``c_j = B^T t_j`` (method.md: a model built on per-vertex residuals is orders of
+magnitude slower). The CasADi problem is built once, symbolic in ``G``, ``C``, ``X~`` and
+``lambda`` (its parameters), and reused for every alternation.
+
+The complementarity constraint violates the usual constraint qualifications, so IPOPT can stop a
+little off the constraint set. Each IPOPT answer is therefore *polished*: for every pair the
+smaller weight is set to zero (the branch IPOPT chose), and the remaining convex box-constrained QP
+is solved exactly by an active-set least-squares solver (BVLS). The polished point satisfies the
+bounds and every complementarity constraint exactly and is never worse than IPOPT's on that
+branch; both IPOPT's status and the polish are reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError, SolverError
+
+#: IPOPT return statuses that count as a successful solve.
+IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+
+
+@dataclass(frozen=True)
+class WeightSolution:
+    """Result of one weight step.
+
+    Attributes
+    ----------
+    weights : (m, k) solved weights (after polishing, if enabled)
+    objective : float, eq. 5 objective at ``weights`` (including the constant ``sum t^T t``)
+    ipopt_status : IPOPT's own return status string
+    ipopt_iterations : IPOPT iteration count
+    ipopt_success : whether the status is one of :data:`IPOPT_OK`
+    ipopt_weights : (m, k) IPOPT's raw answer
+    ipopt_objective : eq. 5 objective at the raw answer
+    max_complementarity : max |x_a x_b| over pairs and examples, at ``weights``
+    max_bound_violation : max violation of 0 <= x <= 1 at ``weights``
+    ipopt_max_complementarity, ipopt_max_bound_violation : the same at IPOPT's raw answer
+    kkt_residual : max KKT residual of the polished branch QPs (0 if not polished)
+    polished : whether ``weights`` come from the exact polish
+    seconds : wall time of IPOPT + polish
+    """
+
+    weights: np.ndarray
+    objective: float
+    ipopt_status: str
+    ipopt_iterations: int
+    ipopt_success: bool
+    ipopt_weights: np.ndarray
+    ipopt_objective: float
+    max_complementarity: float
+    max_bound_violation: float
+    ipopt_max_complementarity: float
+    ipopt_max_bound_violation: float
+    kkt_residual: float
+    polished: bool
+    seconds: float
+
+
+def eq5_objective(X, G, C, const, X_prior, lam) -> float:
+    """Eq. 5 objective for weights X (m, k), G (k, k), C (k, m), const (m,) = t_j^T t_j."""
+    X = np.asarray(X, float)
+    data = np.einsum("jk,kl,jl->", X, G, X) - 2.0 * np.einsum("kj,jk->", C, X) + float(np.sum(const))
+    return float(data + lam * np.sum((X - X_prior) ** 2))
+
+
+def complementarity_violation(X, pairs) -> float:
+    if len(pairs) == 0:
+        return 0.0
+    P = np.asarray(pairs)
+    return float(np.max(np.abs(X[:, P[:, 0]] * X[:, P[:, 1]])))
+
+
+def bound_violation(X) -> float:
+    return float(max(0.0, -np.min(X), np.max(X) - 1.0))
+
+
+def box_qp_kkt(H, g, x, lo, hi) -> float:
+    """Max KKT residual of ``min 1/2 x^T H x + g^T x, lo <= x <= hi`` at x (projected gradient)."""
+    grad = H @ x + g
+    proj = np.clip(x - grad, lo, hi) - x
+    return float(np.max(np.abs(proj))) if len(x) else 0.0
+
+
+def solve_box_qp(H, g, lo, hi):
+    """Exact minimiser of ``1/2 x^T H x + g^T x`` on the box ``lo <= x <= hi`` (H positive definite).
+
+    Written as the bounded least-squares problem ``min ||R x + R^-T g||^2`` with ``H = R^T R`` and
+    solved by BVLS (Stark & Parker 1995; ``scipy.optimize.lsq_linear``), an active-set method that
+    terminates at the exact optimum.
+    """
+    from scipy.linalg import cholesky, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    n = len(g)
+    if n == 0:
+        return np.zeros(0)
+    R = cholesky(H, lower=False)
+    b = -solve_triangular(R, g, trans="T", lower=False)
+    res = lsq_linear(R, b, bounds=(lo, hi), method="bvls", tol=1e-14, lsq_solver="exact")
+    return np.clip(res.x, lo, hi)
+
+
+class WeightSolver:
+    """CasADi/IPOPT model of eq. 5 for m examples and k shapes, built once, solved many times.
+
+    Parameters
+    ----------
+    n_shapes : k
+    n_examples : m
+    pairs : sequence of (a, b) shape indices that are mutually exclusive
+    ipopt_options : extra IPOPT options (``tol``, ``max_iter``, ...)
+    polish : polish every answer exactly on IPOPT's complementarity branch
+    """
+
+    def __init__(self, n_shapes: int, n_examples: int, pairs=(), ipopt_options: dict | None = None,
+                 polish: bool = True):
+        import casadi as ca
+
+        self.k, self.m = int(n_shapes), int(n_examples)
+        P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        if len(P) and (P.min() < 0 or P.max() >= self.k):
+            raise InputError(f"exclusive pairs: expected shape indices in [0, {self.k}), found {P.tolist()}")
+        if len(P) and np.any(P[:, 0] == P[:, 1]):
+            raise InputError(f"exclusive pairs: a pair names one shape twice: {P[P[:, 0] == P[:, 1]].tolist()}")
+        self.pairs = P
+        self.polish = polish
+        k, m = self.k, self.m
+        # matrix-level MX graph: its size does not grow with k^2 m, so building is fast
+        x = ca.MX.sym("x", k * m)            # x_j = x[j*k : (j+1)*k]
+        G = ca.MX.sym("G", k, k)
+        C = ca.MX.sym("C", k, m)
+        Xp = ca.MX.sym("Xp", k, m)
+        lam = ca.MX.sym("lam")
+        Xm = ca.reshape(x, k, m)
+        # eq. 5: sum_j ||B x_j - t_j||^2 - t_j^T t_j = sum_j x_j^T G x_j - 2 c_j^T x_j,
+        #        plus the prior lambda sum_j ||x_j - x~_j||^2
+        f = ca.sum1(ca.sum2(Xm * ca.mtimes(G, Xm))) - 2 * ca.sum1(ca.sum2(C * Xm)) + lam * ca.sumsqr(Xm - Xp)
+        p = ca.vertcat(ca.vec(G), ca.vec(C), ca.vec(Xp), lam)
+        nlp = {"x": x, "p": p, "f": f}
+        g = []
+        if len(P):
+            # eq. 5 complementarity: x_aj * x_bj = 0 for every exclusive pair (a, b) and example j
+            g = ca.vec(Xm[P[:, 0].tolist(), :] * Xm[P[:, 1].tolist(), :])
+            nlp["g"] = g
+            g = [None] * (len(P) * m)
+        self.n_constraints = len(g)
+        opts = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
+                                               "max_iter": 3000, "acceptable_tol": 1e-7}}
+        opts["ipopt"].update(ipopt_options or {})
+        self._solver = ca.nlpsol("weights", "ipopt", nlp, opts)
+
+    def solve(self, G, C, const, X_prior, lam: float, X0=None) -> WeightSolution:
+        """Solve eq. 5.
+
+        Parameters
+        ----------
+        G : (k, k) Gram matrix ``B^T B``
+        C : (k, m) ``B^T t_j`` for every example
+        const : (m,) ``t_j^T t_j``
+        X_prior : (m, k) rough weights ``x~``
+        lam : prior weight lambda >= 0
+        X0 : (m, k) starting point (default: ``X_prior`` clipped to [0, 1])
+
+        Raises
+        ------
+        SolverError
+            IPOPT fails and no polish is requested; the message carries IPOPT's status.
+        """
+        import time
+
+        t0 = time.perf_counter()
+        k, m = self.k, self.m
+        G = np.asarray(G, float)
+        C = np.asarray(C, float)
+        X_prior = np.asarray(X_prior, float)
+        if G.shape != (k, k) or C.shape != (k, m) or X_prior.shape != (m, k):
+            raise InputError(f"weight step: expected G {(k, k)}, C {(k, m)}, prior {(m, k)}, found "
+                             f"{G.shape}, {C.shape}, {X_prior.shape}")
+        if not (np.isfinite(G).all() and np.isfinite(C).all() and np.isfinite(X_prior).all()):
+            raise InputError("weight step: expected finite Gram matrices and prior weights, found NaN/inf")
+        if lam < 0:
+            raise InputError(f"lambda: expected >= 0, found {lam}")
+        x0 = np.clip(X_prior if X0 is None else X0, 0.0, 1.0)
+        p = np.concatenate([G.ravel(order="F"), C.ravel(order="F"), X_prior.T.ravel(order="F"), [lam]])
+        args = {"x0": x0.ravel(), "p": p, "lbx": 0.0, "ubx": 1.0}
+        if self.n_constraints:
+            args.update(lbg=0.0, ubg=0.0)
+        sol = self._solver(**args)
+        stats = self._solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        iters = int(stats.get("iter_count", -1))
+        X_ipopt = np.asarray(sol["x"]).reshape(m, k)
+        ok = status in IPOPT_OK
+        const = np.asarray(const, float)
+        obj_ipopt = eq5_objective(X_ipopt, G, C, const, X_prior, lam)
+        X, kkt = X_ipopt, 0.0
+        if self.polish:
+            X, kkt = self._polish(G, C, X_prior, lam, X_ipopt)
+        elif not ok:
+            raise SolverError(f"weight step: IPOPT failed with status {status} after {iters} iterations", status)
+        return WeightSolution(
+            weights=X, objective=eq5_objective(X, G, C, const, X_prior, lam), ipopt_status=status,
+            ipopt_iterations=iters, ipopt_success=ok, ipopt_weights=X_ipopt, ipopt_objective=obj_ipopt,
+            max_complementarity=complementarity_violation(X, self.pairs), max_bound_violation=bound_violation(X),
+            ipopt_max_complementarity=complementarity_violation(X_ipopt, self.pairs),
+            ipopt_max_bound_violation=bound_violation(X_ipopt), kkt_residual=kkt, polished=self.polish,
+            seconds=time.perf_counter() - t0,
+        )
+
+    def _polish(self, G, C, X_prior, lam, X_ipopt, tol: float = 1e-6):
+        """Exact solve of each example's box QP on the branch IPOPT chose.
+
+        For a pair with one weight above ``tol`` the smaller weight is fixed at 0. A pair with both
+        weights at ~0 (biactive) starts with both fixed; while the objective's gradient says that
+        freeing one of them would decrease it, the one with the most negative gradient is freed
+        and the QP re-solved. The result is B-stationary for the complementarity problem and never
+        worse than IPOPT's answer projected onto its branch.
+        """
+        k = self.k
+        H_full = 2.0 * (G + lam * np.eye(k))
+        X = np.empty_like(X_ipopt)
+        kkt = 0.0
+        for j in range(self.m):  # examples are independent given the blendshapes
+            x = np.clip(X_ipopt[j], 0.0, 1.0)
+            g_full = -2.0 * (C[:, j] + lam * X_prior[j])
+            zero = np.zeros(k, bool)
+            biactive = []
+            for a, b in self.pairs:
+                if max(x[a], x[b]) <= tol:
+                    zero[a] = zero[b] = True
+                    biactive.append((a, b))
+                else:
+                    zero[b if x[a] >= x[b] else a] = True
+            for _ in range(len(biactive) + 1):
+                free = ~zero
+                xs = np.zeros(k)
+                xs[free] = solve_box_qp(H_full[np.ix_(free, free)], g_full[free],
+                                        np.zeros(free.sum()), np.ones(free.sum()))
+                grad = H_full @ xs + g_full
+                best, best_i = 0.0, -1
+                for a, b in biactive:
+                    if zero[a] and zero[b]:
+                        for i in (a, b):
+                            if grad[i] < best:
+                                best, best_i = grad[i], i
+                if best_i < 0:
+                    break
+                zero[best_i] = False
+            free = ~zero
+            kkt = max(kkt, box_qp_kkt(H_full[np.ix_(free, free)], g_full[free], xs[free], 0.0, 1.0))
+            X[j] = xs
+        return X, kkt

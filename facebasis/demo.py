@@ -5,8 +5,10 @@ Writes into one folder (atomically):
 * ``template/`` - the generic default rig (neutral + blendshapes as OBJ)
 * ``person_neutral.obj`` - the second person's neutral
 * ``transfer/`` - deformation transfer of the template onto the person
-* ``summary.json`` - figures of the run
-* ``figures/`` - renders and error maps (PNG)
+* ``rig/`` - example-based generation (seed 000) from 10 training expressions of the person with
+  rough (noisy) weights: the generated blendshapes, ``weights.json``, ``history.json``
+* ``summary.json`` - figures of the run (times, errors against the person's true shapes)
+* ``figures/`` - renders, error maps and the convergence plot (PNG)
 """
 
 from __future__ import annotations
@@ -46,9 +48,46 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         summary["transfer_relative_error_vs_person_truth"] = dict(zip(template.names, map(float, err)))
         log(f"deformation transfer: {template.n_shapes} shapes in {summary['transfer_seconds']:.3f} s; "
             f"median relative error against the person's true shapes {np.median(err):.3f}")
-        from .figures import demo_figures
+        # example-based generation from training expressions of the person
+        from .synthetic import default_face_problem
 
-        demo_figures(stage / "figures", template, person, {"deformation transfer": transferred})
+        from .examples import weights_to_json
+        from .generation import GenerationOptions, generate_blendshapes, refit_weights
+        from .results import history_to_json
+
+        pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
+        options = GenerationOptions(iterations=3 if quick else 10)
+
+        def progress(rec, total):
+            log(f"  iteration {rec.iteration}/{total}: E_fit {rec.e_fit:.4g} E_reg {rec.e_reg:.4g} "
+                f"weight objective {rec.weight_objective:.6g} IPOPT {rec.ipopt_status}")
+
+        result = generate_blendshapes(pp.problem, options, progress)
+        write_shapes(stage / "rig", result.rig)
+        atomic_write_json(stage / "rig" / "weights.json",
+                          weights_to_json(result.weights, pp.problem.example_names, template.names))
+        atomic_write_json(stage / "rig" / "history.json", history_to_json(result, options, pp.problem))
+        gen_err = _relative_errors(result.rig.deltas, person.deltas)
+        heldout = {}
+        for label, rig in (("example-based", result.rig), ("deformation transfer", transferred)):
+            sol = refit_weights(rig, pp.heldout, pp.problem.pair_indices)
+            heldout[label] = float(np.linalg.norm(rig.evaluate(sol.weights) - pp.heldout)
+                                   / np.linalg.norm(pp.heldout - rig.neutral))
+        summary["generation"] = {
+            "seconds": result.seconds + result.precompute_seconds,
+            "ipopt_statuses": [h.ipopt_status for h in result.history],
+            "shape_relative_error_vs_truth_median": float(np.median(gen_err)),
+            "heldout_relative_error": heldout,
+            "missing_expressions": list(result.missing),
+        }
+        log(f"example-based generation: {len(result.history)} iterations in "
+            f"{summary['generation']['seconds']:.2f} s; held-out expression error {heldout['example-based']:.4f} "
+            f"vs deformation transfer {heldout['deformation transfer']:.4f}")
+        from .figures import convergence_figure, demo_figures
+
+        demo_figures(stage / "figures", template, person,
+                     {"deformation transfer": transferred, "example-based": result.rig})
+        convergence_figure(history_to_json(result, options, pp.problem), stage / "figures" / "convergence")
         atomic_write_json(stage / "summary.json", summary)
     log(f"wrote {out}")
     return summary

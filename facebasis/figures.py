@@ -76,6 +76,48 @@ def demo_figures(folder: Path, template, person, results: dict) -> list[Path]:
         draw_mesh(ax, V, template.faces)
         ax.set_title(title, fontsize=9)
     paths = save(fig, folder / "default_faces")
-    names = ["jawOpen", "mouthSmile_L", "mouthPucker", "cheekPuff_R"]
+    names = ["jawOpen", "mouthSmile_L", "mouthPucker", "cheekPuff_R"]  # rows of the error grid
     paths += shape_error_grid(template, person, results, names, folder / "error_maps")
     return paths
+
+
+def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path]:
+    """Convergence of a rig run: E_fit, E_reg, weight objective and complementarity residual per
+    iteration, with the alpha / lambda schedule on a second axis. Reads ``history.json`` content."""
+    plt = _pyplot()
+    its = history["iterations"]
+    i = np.array([h["iteration"] for h in its])
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    ax = axes[0]
+    ax.semilogy(i, [h["e_fit"] for h in its], "o-", label=r"$E_{fit}$ (eq. 2)")
+    ax.semilogy(i, [h["e_reg"] for h in its], "s-", label=r"$E_{reg}$ (eq. 3)")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("basis-step energy")
+    ax2 = ax.twinx()
+    ax2.plot(i, [h["alpha"] for h in its], "k--", lw=1, label=r"$\alpha$")
+    ax2.set_ylabel(r"$\alpha$")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = axes[1]
+    ax.semilogy(i, [h["weight_objective"] for h in its], "o-", label="polished")
+    ax.semilogy(i, [h["ipopt_objective"] for h in its], "x--", label="IPOPT")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("weight-step objective (eq. 5)")
+    ax2 = ax.twinx()
+    ax2.plot(i, [h["lam"] for h in its], "k--", lw=1)
+    ax2.set_ylabel(r"$\lambda$")
+    ax.legend(fontsize=8)
+    ax = axes[2]
+    floor = 1e-20  # values at or below it (exact zeros included) are drawn on this floor
+    for key, style, label in (("ipopt_max_complementarity", "x--", "IPOPT: max |x_a x_b|"),
+                              ("ipopt_max_bound_violation", "+--", "IPOPT: bound violation"),
+                              ("max_complementarity", "o-", "polished: max |x_a x_b|"),
+                              ("max_bound_violation", "s:", "polished: bound violation")):
+        ax.semilogy(i, [max(h[key], floor) for h in its], style, label=label, ms=4)
+    ax.axhline(floor, color="0.6", lw=0.8)
+    ax.text(i[0], floor * 3, "<= 1e-20 (incl. exact 0)", fontsize=7, color="0.4")
+    ax.set_ylim(floor / 10, 1.0)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("constraint residual")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return save(fig, path, formats)

@@ -151,7 +151,7 @@ def test_initial_weight_noise_changes_little():
     generated rig from noisy weights stays closer to the truth than deformation transfer.
     """
     from facebasis.transfer import deformation_transfer
-    from problems.generation import default_face_problem
+    from facebasis.synthetic import default_face_problem
 
     pp = default_face_problem(seed=0, noise=0.0)
     base = generate_blendshapes(pp.problem, GenerationOptions(iterations=5))
@@ -171,7 +171,7 @@ def test_initial_weight_noise_changes_little():
 
 def test_missing_expression_is_flagged():
     """A template without cheek puffs cannot express a cheek-puff example: it must be named."""
-    from problems.generation import default_face_problem
+    from facebasis.synthetic import default_face_problem
 
     pp = default_face_problem(seed=1)
     tpl = pp.problem.template

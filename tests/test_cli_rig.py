@@ -1,0 +1,102 @@
+"""facebasis rig: inputs, validation before solving, outputs."""
+
+import json
+
+import numpy as np
+import pytest
+
+from facebasis.cli import main
+from facebasis.default_face import default_template
+from facebasis.meshio import write_mesh
+from facebasis.rig import load_rig_folder, write_rig_folder
+from facebasis.synthetic import default_face_problem
+
+
+@pytest.fixture(scope="module")
+def rig_inputs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rig")
+    pp = default_face_problem(seed=0, n_train=6)
+    p = pp.problem
+    write_rig_folder(root / "template", p.template)
+    write_mesh(root / "target.obj", p.target_neutral, p.template.faces)
+    (root / "examples").mkdir()
+    for name, T in zip(p.example_names, p.examples):
+        write_mesh(root / "examples" / f"{name}.obj", T, p.template.faces)
+    weights = {n: {s: float(v) for s, v in zip(p.template.names, row) if v > 0}
+               for n, row in zip(p.example_names, p.initial_weights)}
+    (root / "weights.json").write_text(json.dumps(weights))
+    return root, pp
+
+
+def args(root, **over):
+    a = {"--template": root / "template", "--target": root / "target.obj", "--examples": root / "examples",
+         "--weights": root / "weights.json", "--out": root / "out", "--iterations": "3"}
+    a.update(over)
+    out = ["rig"]
+    for k, v in a.items():
+        out += [k, str(v)]
+    return out
+
+
+def test_rig_cli_writes_everything(rig_inputs, capsys):
+    root, pp = rig_inputs
+    code = main(args(root) + ["--exclusive", "mouthLeft:mouthRight", "eyeBlink_L:eyeWide_L"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "iteration 3/3" in out and "generated 15 blendshapes" in out
+    rig = load_rig_folder(root / "out")
+    assert set(rig.names) == set(default_template().names)
+    w = json.loads((root / "out" / "weights.json").read_text())
+    assert set(w) == set(pp.problem.example_names)
+    for row in w.values():
+        assert all(0.0 <= v <= 1.0 for v in row.values())
+        assert not (row.get("mouthLeft", 0) > 0 and row.get("mouthRight", 0) > 0)
+    hist = json.loads((root / "out" / "history.json").read_text())
+    assert len(hist["iterations"]) == 3 and hist["iterations"][0]["ipopt_status"] == "Solve_Succeeded"
+    for key in ("alpha", "lam", "e_fit", "e_reg", "weight_objective", "max_complementarity",
+                "max_bound_violation", "ipopt_iterations", "basis_seconds", "weight_seconds"):
+        assert key in hist["iterations"][0]
+    res = json.loads((root / "out" / "residuals.json").read_text())
+    assert set(res["relative_residual"]) == set(pp.problem.example_names)
+
+
+@pytest.mark.parametrize("mutate,message", [
+    (lambda w: w["ex00"].update({"jawOpn": 0.3}), r"ex00: unknown blendshape names \['jawOpn'\]"),
+    (lambda w: w["ex01"].update({"jawOpen": 1.3}), r"ex01.jawOpen: expected a weight in \[0, 1\], found 1.3"),
+    (lambda w: w.pop("ex02"), r"expected weights for every example, found none for \['ex02'\]"),
+    (lambda w: w.update({"ex99": {}}), r"found weights for examples that are not in the examples folder: \['ex99'\]"),
+    (lambda w: w["ex00"].update({"jawOpen": "high"}), r"ex00.jawOpen: expected a number in \[0, 1\], found 'high'"),
+])
+def test_rig_cli_weight_errors(rig_inputs, tmp_path, capsys, mutate, message):
+    root, _ = rig_inputs
+    w = json.loads((root / "weights.json").read_text())
+    mutate(w)
+    bad = tmp_path / "w.json"
+    bad.write_text(json.dumps(w))
+    assert main(args(root, **{"--weights": bad, "--out": tmp_path / "o"})) == 2
+    err = capsys.readouterr().err
+    assert "w.json" in err
+    import re
+
+    assert re.search(message, err), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_rig_cli_other_errors(rig_inputs, tmp_path, capsys):
+    root, _ = rig_inputs
+    assert main(args(root, **{"--out": tmp_path / "o"}) + ["--exclusive", "mouthLeft:mouthUp"]) == 2
+    assert "exclusive pair mouthLeft:mouthUp: unknown blendshape names ['mouthUp']" in capsys.readouterr().err
+    assert main(args(root, **{"--out": tmp_path / "o"}) + ["--exclusive", "mouthLeft"]) == 2
+    assert "--exclusive: expected SHAPE_A:SHAPE_B, found 'mouthLeft'" in capsys.readouterr().err
+    assert main(args(root, **{"--out": tmp_path / "o", "--alpha": "big"})) == 2
+    assert "--alpha: expected two numbers FIRST,LAST, found 'big'" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text("{not json")
+    assert main(args(root, **{"--out": tmp_path / "o", "--weights": tmp_path / "bad.json"})) == 2
+    assert "bad.json: expected valid JSON, found a parse error" in capsys.readouterr().err
+    ex = tmp_path / "ex"
+    ex.mkdir()
+    V = default_template().neutral
+    write_mesh(ex / "ex00.obj", V[:-1], default_template().faces[:-30])
+    assert main(args(root, **{"--out": tmp_path / "o", "--examples": ex})) == 2
+    assert "ex00.obj: expected 4497 vertices as in template" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

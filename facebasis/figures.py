@@ -63,18 +63,12 @@ def demo_figures(folder: Path, template, person, results: dict) -> list[Path]:
     plt = _pyplot()
     folder.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(2, 4, figsize=(12, 7))
-    for ax, (title, V) in zip(axes[0], [("template neutral", template.neutral),
-                                        ("template jawOpen", template.shape("jawOpen")),
-                                        ("template mouthSmile_L", template.shape("mouthSmile_L")),
-                                        ("template eyeBlink_L", template.shape("eyeBlink_L"))]):
-        draw_mesh(ax, V, template.faces)
-        ax.set_title(title, fontsize=9)
-    for ax, (title, V) in zip(axes[1], [("person neutral", person.neutral),
-                                        ("person jawOpen (truth)", person.shape("jawOpen")),
-                                        ("person mouthSmile_L (truth)", person.shape("mouthSmile_L")),
-                                        ("person eyeBlink_L (truth)", person.shape("eyeBlink_L"))]):
-        draw_mesh(ax, V, template.faces)
-        ax.set_title(title, fontsize=9)
+    rows = ((template, "template", ""), (person, "person", " (truth)"))
+    for ax_row, (rig, who, note) in zip(axes, rows):
+        for ax, shape in zip(ax_row, (None, "jawOpen", "mouthSmile_L", "eyeBlink_L")):
+            V = rig.neutral if shape is None else rig.shape(shape)
+            draw_mesh(ax, V, rig.faces)
+            ax.set_title(f"{who} {shape or 'neutral'}{note if shape else ''}", fontsize=9)
     paths = save(fig, folder / "default_faces")
     names = ["jawOpen", "mouthSmile_L", "mouthPucker", "cheekPuff_R"]  # rows of the error grid
     paths += shape_error_grid(template, person, results, names, folder / "error_maps")

@@ -288,8 +288,7 @@ class BlendshapeGenerator:
     deformation-transfer prior, regulariser weights, training frame deltas and the CasADi solver.
     """
 
-    def __init__(self, problem: GenerationProblem, options: GenerationOptions | None = None,
-                 virtual_edges=None):
+    def __init__(self, problem: GenerationProblem, options: GenerationOptions | None = None):
         t0 = time.perf_counter()
         self.problem = problem
         self.options = options or GenerationOptions()

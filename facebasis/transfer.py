@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError, TopologyError
+from .errors import InputError
 from .gradients import edge_columns_to_rows, frames_cm, triangle_frames
 from .mesh import validate_mesh, validate_vertices
 from .poisson import EdgePoisson, choose_anchors
@@ -105,7 +105,8 @@ class DeformationTransfer:
         """Transfer every template shape (or those named) onto the target neutral."""
         idx = np.arange(self.template.n_shapes) if names is None else self.template.index(list(names))
         if self.poisson.extra_rows is not None:
-            raise InputError("transfer with extra rows needs their targets: use the virtual-edge API")
+            raise InputError("transfer(): this transfer was built with extra rows; pass their targets to "
+                             "solve_frame_deltas(..., extra_cols=...)")
         D = self.template.deltas[idx]
         out = self.solve_frame_deltas(self.transferred_frame_deltas(D), self.anchor_values(D))
         return Rig(self.target_neutral, self.template.faces,

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import bumpy_sheet, grid_sheet
+from conftest import grid_sheet
 
 from facebasis.errors import InputError
 from facebasis.gradients import (deformation_gradients, edge_columns_to_rows, edge_operator, frames_cm,

@@ -117,3 +117,23 @@ def test_reconstruction_checks_target_shape(sheet):
     rec = EdgePoisson(F, len(V), [0])
     with pytest.raises(InputError, match=r"edge_targets: expected shape \(\.\.\., 84, 3, d\)"):
         rec.solve(np.zeros((10, 3, 3)))
+
+
+def test_reconstruction_extra_rows_enter_the_energy(sheet):
+    """Extra rows (e.g. virtual edges): consistent targets keep the exact answer; a heavily weighted
+    extra edge with another target pulls its two vertices to that vector."""
+    import scipy.sparse as sp
+
+    V, F = sheet
+    anchors = choose_anchors(F, len(V))
+    i, j = 3, 40
+    X = sp.csr_matrix(([1.0, -1.0], ([0, 0], [j, i])), shape=(1, len(V)))
+    rec = EdgePoisson(F, len(V), anchors, extra_rows=X, extra_weight=5.0)
+    exact = rec.solve(triangle_edges(V, F), V[anchors], extra_targets=(V[j] - V[i])[None])
+    assert np.allclose(exact, V, atol=1e-12)
+    want = V[j] - V[i] + np.array([0.0, 0.0, 0.3])
+    strong = EdgePoisson(F, len(V), anchors, extra_rows=X, extra_weight=1e8)
+    out = strong.solve(triangle_edges(V, F), V[anchors], extra_targets=want[None])
+    assert np.allclose(out[j] - out[i], want, atol=1e-6)
+    with pytest.raises(InputError, match="expected targets for the extra"):
+        strong.solve(triangle_edges(V, F), V[anchors])

@@ -23,7 +23,6 @@ def _add_rig_folder_args(p: argparse.ArgumentParser) -> None:
 
 def cmd_transfer(args) -> int:
     from .atomic import atomic_directory
-    from .meshio import write_mesh
     from .rig import load_rig_folder, load_target_neutral, write_shapes
     from .transfer import DeformationTransfer
 
@@ -33,8 +32,7 @@ def cmd_transfer(args) -> int:
     result = DeformationTransfer(template, target).transfer()
     seconds = time.perf_counter() - t0
     with atomic_directory(args.out) as stage:
-        write_shapes(stage, result, neutral_name=None)
-        write_mesh(stage / "neutral.obj", result.neutral, result.faces)
+        write_shapes(stage, result)
     print(f"transferred {result.n_shapes} shapes onto {args.target} in {seconds:.3f} s -> {args.out}")
     return 0
 
@@ -57,7 +55,6 @@ def cmd_rig(args) -> int:
     from .atomic import atomic_directory, atomic_write_json
     from .examples import load_examples, load_weights, parse_pairs, weights_to_json
     from .generation import GenerationOptions, GenerationProblem, BlendshapeGenerator
-    from .meshio import write_mesh
     from .rig import load_rig_folder, load_target_neutral, write_shapes
     from .results import history_to_json
 
@@ -81,8 +78,7 @@ def cmd_rig(args) -> int:
 
     result = gen.run(progress)
     with atomic_directory(args.out) as stage:
-        write_shapes(stage, result.rig, neutral_name=None)
-        write_mesh(stage / "neutral.obj", result.rig.neutral, result.rig.faces)
+        write_shapes(stage, result.rig)
         atomic_write_json(stage / "weights.json", weights_to_json(result.weights, names, template.names))
         atomic_write_json(stage / "history.json", history_to_json(result, options, problem))
         atomic_write_json(stage / "residuals.json", {

@@ -52,7 +52,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         from .synthetic import default_face_problem
 
         from .examples import weights_to_json
-        from .generation import GenerationOptions, generate_blendshapes, refit_weights
+        from .generation import GenerationOptions, generate_blendshapes, reproduction_error
         from .results import history_to_json
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
@@ -66,13 +66,11 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         write_shapes(stage / "rig", result.rig)
         atomic_write_json(stage / "rig" / "weights.json",
                           weights_to_json(result.weights, pp.problem.example_names, template.names))
-        atomic_write_json(stage / "rig" / "history.json", history_to_json(result, options, pp.problem))
+        history = history_to_json(result, options, pp.problem)
+        atomic_write_json(stage / "rig" / "history.json", history)
         gen_err = _relative_errors(result.rig.deltas, person.deltas)
-        heldout = {}
-        for label, rig in (("example-based", result.rig), ("deformation transfer", transferred)):
-            sol = refit_weights(rig, pp.heldout, pp.problem.pair_indices)
-            heldout[label] = float(np.linalg.norm(rig.evaluate(sol.weights) - pp.heldout)
-                                   / np.linalg.norm(pp.heldout - rig.neutral))
+        heldout = {label: reproduction_error(rig, pp.heldout, pp.problem.pair_indices)
+                   for label, rig in (("example-based", result.rig), ("deformation transfer", transferred))}
         summary["generation"] = {
             "seconds": result.seconds + result.precompute_seconds,
             "ipopt_statuses": [h.ipopt_status for h in result.history],
@@ -87,7 +85,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
 
         demo_figures(stage / "figures", template, person,
                      {"deformation transfer": transferred, "example-based": result.rig})
-        convergence_figure(history_to_json(result, options, pp.problem), stage / "figures" / "convergence")
+        convergence_figure(history, stage / "figures" / "convergence")
         atomic_write_json(stage / "summary.json", summary)
     log(f"wrote {out}")
     return summary

@@ -387,6 +387,14 @@ def refit_weights(rig: Rig, expressions: np.ndarray, pairs=(), lam: float = 0.0,
     return solver.solve(B @ B.T, B @ T.T, (T ** 2).sum(1), prior, lam)
 
 
+def reproduction_error(rig: Rig, expressions: np.ndarray, pairs=(), solver: WeightSolver | None = None) -> float:
+    """How well ``rig`` reproduces expressions (h, n, 3) with refitted weights (bounds, complementarity,
+    no prior): ``||B_0 + B x - T|| / ||T - B_0||`` over all of them. Compares rigs fairly, since a
+    shape's amplitude and its weight trade off (method.md A)."""
+    sol = refit_weights(rig, expressions, pairs, solver=solver)
+    return float(np.linalg.norm(rig.evaluate(sol.weights) - expressions) / np.linalg.norm(expressions - rig.neutral))
+
+
 __all__ = ["GenerationProblem", "GenerationOptions", "GenerationResult", "IterationRecord", "BlendshapeGenerator",
            "generate_blendshapes", "basis_step", "basis_energies", "regularisation_weights", "relative_residuals",
-           "refit_weights", "eq5_objective"]
+           "refit_weights", "reproduction_error", "eq5_objective"]

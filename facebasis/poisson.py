@@ -146,7 +146,7 @@ class EdgePoisson:
         rhs = np.ascontiguousarray(rhs, dtype=np.float64)
         if self._chol is not None:
             x = np.zeros_like(rhs)
-            self._chol.solve(rhs if rhs.ndim == 2 else rhs[:, None], x if x.ndim == 2 else x[:, None])
+            self._chol.solve(rhs, x)
             return x
         return self._lu.solve(rhs)
 

@@ -149,13 +149,10 @@ class WeightSolver:
         f = ca.sum1(ca.sum2(Xm * ca.mtimes(G, Xm))) - 2 * ca.sum1(ca.sum2(C * Xm)) + lam * ca.sumsqr(Xm - Xp)
         p = ca.vertcat(ca.vec(G), ca.vec(C), ca.vec(Xp), lam)
         nlp = {"x": x, "p": p, "f": f}
-        g = []
         if len(P):
             # eq. 5 complementarity: x_aj * x_bj = 0 for every exclusive pair (a, b) and example j
-            g = ca.vec(Xm[P[:, 0].tolist(), :] * Xm[P[:, 1].tolist(), :])
-            nlp["g"] = g
-            g = [None] * (len(P) * m)
-        self.n_constraints = len(g)
+            nlp["g"] = ca.vec(Xm[P[:, 0].tolist(), :] * Xm[P[:, 1].tolist(), :])
+        self.n_constraints = len(P) * m
         opts = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
                                                "max_iter": 3000, "acceptable_tol": 1e-7}}
         opts["ipopt"].update(ipopt_options or {})

@@ -57,6 +57,7 @@ def cmd_rig(args) -> int:
     from .generation import GenerationOptions, GenerationProblem, BlendshapeGenerator
     from .rig import load_rig_folder, load_target_neutral, write_shapes
     from .results import history_to_json
+    from .verify import write_inputs
 
     # everything is validated before any solving starts
     options = GenerationOptions(iterations=args.iterations, alpha=_pair_of_floats(args.alpha, "--alpha"),
@@ -85,15 +86,31 @@ def cmd_rig(args) -> int:
             "threshold": options.missing_threshold,
             "relative_residual": dict(zip(names, map(float, result.residuals))),
             "missing": list(result.missing)})
+        write_inputs(stage, args.examples, args.weights, problem.exclusive, options.schedule()[-1][1])
     failed = [h for h in result.history if not h.ipopt_success]
     for h in failed:
-        print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was polished "
-              "exactly on its complementarity branch", file=sys.stderr)
+        print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was replaced "
+              "by the certified optimum (branch and bound)", file=sys.stderr)
     for name in result.missing:
         print(f"warning: training expression {name} keeps a relative residual of "
               f"{result.residuals[names.index(name)]:.3f} > {options.missing_threshold}: the template "
               "may lack a shape it needs (missing expression)", file=sys.stderr)
     print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
+    return 0
+
+
+def cmd_verify(args) -> int:
+    from .verify import verify_run
+
+    report = verify_run(args.run_dir, tolerance=args.tolerance)
+    print(f"{report.run_dir}: {len(report.examples)} examples, lambda {report.lam:g}, tolerance {report.tolerance:g} "
+          "(relative objective gap of the stored weights to the certified global optimum)")
+    print(report.table())
+    bad = [e.name for e in report.examples if not e.ok]
+    if bad:
+        print(f"NOT OPTIMAL: {len(bad)} of {len(report.examples)} stored answers ({', '.join(bad)})", file=sys.stderr)
+        return 1
+    print(f"all {len(report.examples)} stored answers are certified optimal")
     return 0
 
 
@@ -131,6 +148,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exclusive", nargs="*", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0)")
     p.set_defaults(func=cmd_rig)
+
+    p = sub.add_parser("verify", help="certify the stored weights of a `facebasis rig` output folder")
+    p.add_argument("run_dir", help="output folder of `facebasis rig` (with inputs.json)")
+    p.add_argument("--tolerance", type=float, default=1e-6,
+                   help="largest relative objective gap accepted (default 1e-6); exit status 1 beyond it")
+    p.set_defaults(func=cmd_verify)
     return parser
 
 

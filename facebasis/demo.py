@@ -6,7 +6,9 @@ Writes into one folder (atomically):
 * ``person_neutral.obj`` - the second person's neutral
 * ``transfer/`` - deformation transfer of the template onto the person
 * ``rig/`` - example-based generation (seed 000) from 10 training expressions of the person with
-  rough (noisy) weights: the generated blendshapes, ``weights.json``, ``history.json``
+  rough (noisy) weights: the generated blendshapes, ``weights.json``, ``history.json``,
+  ``inputs.json`` (``facebasis verify OUT/rig`` certifies its weights)
+* ``rig_inputs/`` - those training expressions (OBJ) and rough weights
 * ``summary.json`` - figures of the run (times, errors against the person's true shapes)
 * ``figures/`` - renders, error maps and the convergence plot (PNG)
 """
@@ -54,6 +56,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         from .examples import weights_to_json
         from .generation import GenerationOptions, generate_blendshapes, reproduction_error
         from .results import history_to_json
+        from .verify import write_inputs
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
         options = GenerationOptions(iterations=3 if quick else 10)
@@ -64,6 +67,14 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
 
         result = generate_blendshapes(pp.problem, options, progress)
         write_shapes(stage / "rig", result.rig)
+        # the run's inputs as files, so `facebasis verify OUT/rig` can re-solve its weight step
+        inputs = stage / "rig_inputs"
+        for name, T in zip(pp.problem.example_names, pp.problem.examples):
+            write_mesh(inputs / "examples" / f"{name}.obj", T, template.faces)
+        atomic_write_json(inputs / "weights.json",
+                          weights_to_json(pp.problem.initial_weights, pp.problem.example_names, template.names))
+        write_inputs(stage / "rig", inputs / "examples", inputs / "weights.json", pp.problem.exclusive,
+                     options.schedule()[-1][1], relative_to=stage / "rig")
         atomic_write_json(stage / "rig" / "weights.json",
                           weights_to_json(result.weights, pp.problem.example_names, template.names))
         history = history_to_json(result, options, pp.problem)

@@ -28,10 +28,15 @@ mesh's units (cm vs m). facebasis uses by default the scale-free relative edge c
 
 from __future__ import annotations
 
+import os
 import time
+from contextlib import nullcontext
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from threadpoolctl import threadpool_limits
 
 from .errors import InputError
 from .gradients import frames_cm
@@ -125,6 +130,7 @@ class GenerationOptions:
     missing_threshold: float = 0.2
     polish: bool = True
     ipopt_options: dict = field(default_factory=dict)
+    threads: int | None = None
 
     def __post_init__(self):
         if int(self.iterations) < 1:
@@ -140,6 +146,8 @@ class GenerationOptions:
             raise InputError(f"lambda: expected values >= 0, found {self.lam}")
         if self.weight_measure not in ("relative", "absolute"):
             raise InputError(f"weight_measure: expected 'relative' or 'absolute', found {self.weight_measure!r}")
+        if self.threads is not None and int(self.threads) < 1:
+            raise InputError(f"threads: expected >= 1 or None (all cores), found {self.threads}")
         if not (0 < self.mu < 1) or self.sigma < 0:
             raise InputError(f"mu, sigma: expected 0 < mu < 1 and sigma >= 0, found {self.mu}, {self.sigma}")
 
@@ -216,10 +224,62 @@ def regularisation_weights(template_frame_deltas, template_frames, mu=0.1, sigma
     s = np.sqrt((template_frame_deltas ** 2).sum(axis=(1, 2)))  # (k, m_tri)
     if measure == "relative":
         s = s / np.sqrt((template_frames[:, :2] ** 2).sum(axis=(0, 1)))
+
     return (((1.0 + s) / (mu + s)) ** sigma).T
 
 
-def basis_step(X, R, A_tilde, w, alpha):
+#: triangles per block of the basis step (blocks stay in cache and run on the worker threads)
+BASIS_BLOCK = 512
+
+
+def _basis_block(X, XX, R, A_tilde, w, alpha, out, s):
+    """Eq. 4 on the triangles of slice ``s``; writes ``out[:, :, s]`` and returns (E_fit, E_reg) there.
+
+    ``XX`` is ``X X^T`` (k, k) when m >= k (direct k x k solves), else the (k, m*m) table of
+    ``x_i x_i^T`` for the Woodbury form.
+    """
+    k, m = X.shape
+    wt = w[s]                                   # (c, k)
+    c = wt.shape[0]
+    R_s = np.ascontiguousarray(R[:, :, s])      # (m, 6, c)
+    A_s = A_tilde[:, :, s]
+    if m >= k:  # (X X^T + D) Y = X R + D A~ directly, per triangle
+        D = alpha * wt                          # (c, k)
+        A = np.broadcast_to(XX, (c, k, k)).copy()
+        A.reshape(c, -1)[:, :: k + 1] += D
+        rhs = (X @ R_s.reshape(m, -1)).reshape(k, 6, c)
+        rhs += D.T[:, None, :] * A_s
+        Y = np.ascontiguousarray(np.linalg.solve(A, rhs.transpose(2, 0, 1)).transpose(1, 2, 0))
+        out[:, :, s] = Y
+        return _block_energies(X, Y, R_s, A_s, wt)
+    dinv_t = 1.0 / (alpha * wt)                 # D^-1, (c, k)
+    dinv = dinv_t.T[:, None, :]                 # (k, 1, c)
+    Gm = (X @ R_s.reshape(m, -1)).reshape(k, 6, c)  # sum_j x_ij R_j
+    Gm *= dinv
+    Gm += A_s                                   # D^-1 (X R + D A~)
+    XtG = (X.T @ Gm.reshape(k, -1)).reshape(m, 6, c)
+    # K_t = I + X^T D_t^-1 X for every triangle of the block: one (c, k) x (k, m*m) product
+    K = (dinv_t @ XX).reshape(c, m, m)
+    K.reshape(c, -1)[:, :: m + 1] += 1.0
+    Z = np.linalg.solve(K, XtG.transpose(2, 0, 1))  # (c, m, 6)
+    XZ = (X @ np.ascontiguousarray(Z.transpose(1, 2, 0)).reshape(m, -1)).reshape(k, 6, c)
+    XZ *= dinv
+    Y = np.subtract(Gm, XZ, out=Gm)
+    out[:, :, s] = Y
+    return _block_energies(X, Y, R_s, A_s, wt)
+
+
+def _block_energies(X, Y, R_s, A_s, wt):
+    """Eq. 2 and eq. 3 on one block of triangles."""
+    k, m = X.shape
+    fit = (X.T @ Y.reshape(k, -1)).reshape(R_s.shape)
+    fit -= R_s
+    diff = A_s - Y
+    diff *= diff
+    return float(np.vdot(fit, fit)), float(np.einsum("tk,kct->", wt, diff))
+
+
+def basis_step(X, R, A_tilde, w, alpha, *, executor=None, block: int = BASIS_BLOCK, energies: bool = False):
     """Solve eq. 4 for every triangle at once.
 
     Parameters
@@ -229,43 +289,36 @@ def basis_step(X, R, A_tilde, w, alpha):
     A_tilde : (k, 6, m_tri) deformation-transfer prior ``A~_i``
     w : (m_tri, k) regulariser weights
     alpha : regularisation weight (> 0)
+    executor : optional ``concurrent.futures`` executor; blocks of triangles run on it
+    block : triangles per block
+    energies : also return ``(E_fit, E_reg)`` of eq. 2 and 3 at the solution
 
     Returns
     -------
-    Y : (k, 6, m_tri) blendshape frame deltas ``A_i^B`` minimising ``E_fit + alpha E_reg``.
+    Y : (k, 6, m_tri) blendshape frame deltas ``A_i^B`` minimising ``E_fit + alpha E_reg``
+    (and ``E_fit, E_reg`` if ``energies``).
 
     Notes
     -----
     Per triangle ``(X X^T + D) Y = X R + D A~`` with ``D = alpha diag(w_t)``. With m < k the
     Woodbury identity ``(D + X X^T)^-1 = D^-1 - D^-1 X (I + X^T D^-1 X)^-1 X^T D^-1`` reduces each
-    triangle to an m x m solve; all contractions over k are single BLAS matrix products.
+    triangle to an m x m solve; with m >= k the k x k system is solved directly. Triangles are processed in blocks (cache-sized, one BLAS product
+    per contraction, no Python loop over triangles); blocks are independent and run in parallel
+    on ``executor``.
     """
     k, m = X.shape
     m_tri = R.shape[-1]
-    dinv = (1.0 / (alpha * w)).T  # (k, m_tri)
-    XR = (X @ R.reshape(m, -1)).reshape(k, 6, m_tri)  # sum_j x_ij R_j
-    if m < k:
-        Gm = XR
-        Gm *= dinv[:, None, :]
-        Gm += A_tilde  # D^-1 (X R + D A~)
-        XtG = (X.T @ Gm.reshape(k, -1)).reshape(m, 6, m_tri)
-        # K_t = I + X^T D_t^-1 X for every triangle, from one product over the upper triangle of x x^T
-        iu, ju = np.triu_indices(m)
-        upper = dinv.T @ (X[:, iu] * X[:, ju])  # (m_tri, m(m+1)/2)
-        K = np.empty((m_tri, m, m))
-        K[:, iu, ju] = upper
-        K[:, ju, iu] = upper
-        K[:, np.arange(m), np.arange(m)] += 1.0
-        Z = np.linalg.solve(K, np.moveaxis(XtG, -1, 0))  # (m_tri, m, 6)
-        XZ = (X @ np.moveaxis(Z, 0, -1).reshape(m, -1)).reshape(k, 6, m_tri)
-        XZ *= dinv[:, None, :]
-        np.subtract(Gm, XZ, out=Gm)
-        return Gm
-    # m >= k: the direct k x k system per triangle
-    A = np.broadcast_to(X @ X.T, (m_tri, k, k)).copy()
-    A[:, np.arange(k), np.arange(k)] += alpha * w
-    rhs = XR + alpha * w.T[:, None, :] * A_tilde
-    return np.moveaxis(np.linalg.solve(A, np.moveaxis(rhs, -1, 0)), 0, -1)
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    XX = X @ X.T if m >= k else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
+    out = np.empty((k, 6, m_tri))
+    blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]
+    if executor is None:
+        parts = [_basis_block(X, XX, R, A_tilde, w, alpha, out, s) for s in blocks]
+    else:
+        parts = list(executor.map(lambda s: _basis_block(X, XX, R, A_tilde, w, alpha, out, s), blocks))
+    if not energies:
+        return out
+    return out, float(sum(p[0] for p in parts)), float(sum(p[1] for p in parts))
 
 
 def basis_energies(X, R, A_tilde, w, Y):
@@ -302,13 +355,15 @@ class BlendshapeGenerator:
         dA -= self.dt.template_frames
         # eq. 3 prior: A~_i = Q_i A_0^B - A_0^B = (A_i^S - A_0^S) (A_0^S)^-1 A_0^B
         self.A_tilde = self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6, m_tri)
-        self.w = regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu, opts.sigma,
-                                        opts.weight_measure)
+        self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
+                                                             opts.sigma, opts.weight_measure))  # (m_tri, k)
         del dA
         B0 = problem.target_neutral
         T_frames = frames_cm(problem.examples, F)[:, :, :2] - self.dt.target_frames[:, :2]
         self.R = np.ascontiguousarray(T_frames.reshape(len(problem.examples), 6, m_tri))
-        self.targets = (problem.examples - B0).reshape(len(problem.examples), -1)  # t_j, (m, 3n)
+        # t_j coordinate-major (m, 3n), matching the reconstruction's (k, 3, n) output, so the Gram
+        # matrices of the weight step need no transposed copy of the blendshapes
+        self.targets = np.ascontiguousarray(np.moveaxis(problem.examples - B0, 2, 1)).reshape(len(problem.examples), -1)
         self.target_sq = (self.targets ** 2).sum(1)
         self.pairs = problem.pair_indices
         self.weight_solver = WeightSolver(tpl.n_shapes, len(problem.examples), self.pairs,
@@ -318,11 +373,13 @@ class BlendshapeGenerator:
         self.precompute_seconds = time.perf_counter() - t0
 
     def reconstruct(self, Y) -> np.ndarray:
+        """Vertex deltas (k, n, 3) from the basis step's frame deltas Y (k, 6, m_tri)."""
         k, _, m_tri = Y.shape
         return self.dt.solve_frame_deltas(Y.reshape(k, 3, 2, m_tri), self.anchor_values)
 
     def weight_step(self, deltas, lam, X0=None) -> WeightSolution:
-        B = deltas.reshape(len(deltas), -1)  # (k, 3n)
+        """Eq. 5 with blendshape deltas (k, n, 3) from :meth:`reconstruct`."""
+        B = np.moveaxis(deltas, 2, 1).reshape(len(deltas), -1)  # (k, 3n) coordinate-major, no copy
         G = B @ B.T
         C = B @ self.targets.T
         return self.weight_solver.solve(G, C, self.target_sq, self.problem.initial_weights, lam, X0)
@@ -331,13 +388,28 @@ class BlendshapeGenerator:
         t_start = time.perf_counter()
         p, opts = self.problem, self.options
         X = p.initial_weights.copy()  # (m, k)
-        history = []
-        deltas = None
         schedule = opts.schedule()
+        workers = opts.threads or _available_cores()
+        pool = ThreadPoolExecutor(workers) if workers > 1 else None
+        try:
+            history, X, deltas = self._iterate(X, schedule, pool, progress)
+        finally:
+            if pool is not None:
+                pool.shutdown()
+        rig = Rig(p.target_neutral, p.template.faces, p.template.names, deltas, source="example-based generation")
+        residuals = relative_residuals(rig, p.examples, X)
+        missing = tuple(n for n, r in zip(p.example_names, residuals) if r > opts.missing_threshold)
+        return GenerationResult(rig=rig, weights=X, history=tuple(history), residuals=residuals, missing=missing,
+                                example_names=p.example_names, seconds=time.perf_counter() - t_start,
+                                precompute_seconds=self.precompute_seconds)
+
+    def _iterate(self, X, schedule, pool, progress):
+        history = []
         for it, (alpha, lam) in enumerate(schedule):
             t0 = time.perf_counter()
-            Y = basis_step(X.T, self.R, self.A_tilde, self.w, alpha)
-            e_fit, e_reg = basis_energies(X.T, self.R, self.A_tilde, self.w, Y)
+            # parallel over blocks of triangles, not inside BLAS
+            with threadpool_limits(1) if pool is not None else nullcontext():
+                Y, e_fit, e_reg = basis_step(X.T, self.R, self.A_tilde, self.w, alpha, executor=pool, energies=True)
             deltas = self.reconstruct(Y)
             t1 = time.perf_counter()
             sol = self.weight_step(deltas, lam, X0=X)
@@ -353,12 +425,14 @@ class BlendshapeGenerator:
             ))
             if progress is not None:
                 progress(history[-1], len(schedule))
-        rig = Rig(p.target_neutral, p.template.faces, p.template.names, deltas, source="example-based generation")
-        residuals = relative_residuals(rig, p.examples, X)
-        missing = tuple(n for n, r in zip(p.example_names, residuals) if r > opts.missing_threshold)
-        return GenerationResult(rig=rig, weights=X, history=tuple(history), residuals=residuals, missing=missing,
-                                example_names=p.example_names, seconds=time.perf_counter() - t_start,
-                                precompute_seconds=self.precompute_seconds)
+        return history, X, np.ascontiguousarray(deltas)
+
+
+def _available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
 
 
 def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndarray:

@@ -112,6 +112,8 @@ class EdgePoisson:
         else:
             E_w = E
         self._Et = E_w.T.tocsr()  # E^T C, applied to edge targets
+        self._Ew = E_w
+        self._frame_op = None  # (2m, n) operator of frame edge columns, built on first use
         L = (E.T @ E_w).tocsr()
         self.extra_rows = None
         self.extra_weight = float(extra_weight)
@@ -190,8 +192,44 @@ class EdgePoisson:
         ``anchor_cols`` (c, a) and ``extra_cols`` (c, r) are the matching anchor values and extra
         row targets. Returns (c, n). All c problems share the one factorisation.
         """
-        c = edge_cols.shape[0]
-        rhs = np.asarray(self._Et @ edge_cols.T)  # (n, c)
+        return self._solve_rhs(np.asarray(self._Et @ edge_cols.T), anchor_cols, extra_cols)
+
+    def _frame_operator(self):
+        """``E^T C S`` (n, 2m): S maps frame edge columns ``[a_1..a_m, b_1..b_m]`` (``a = v2 - v1``,
+        ``b = v3 - v1``) to the edges of :data:`~facebasis.gradients.EDGE_CORNERS`, ``a``, ``b - a``
+        and ``-b``; built once."""
+        if self._frame_op is None:
+            m = self.n_faces
+            t = np.arange(m)
+            # rows 3t+e of the edge vector from the a (col t) and b (col m+t) columns
+            rows = np.concatenate([3 * t, 3 * t + 1, 3 * t + 1, 3 * t + 2])
+            cols = np.concatenate([t, t, m + t, m + t])
+            vals = np.concatenate([np.ones(m), -np.ones(m), np.ones(m), -np.ones(m)])
+            S = sp.csr_matrix((vals, (rows, cols)), shape=(3 * m, 2 * m))
+            self._frame_op = (self._Ew.T @ S).tocsr()
+        return self._frame_op
+
+    def solve_frame_columns(self, frame_cols: np.ndarray, anchor_cols: np.ndarray | None = None,
+                            extra_cols: np.ndarray | None = None) -> np.ndarray:
+        """Like :meth:`solve_columns`, from frame edge columns (c, 2m), one problem per row:
+        ``[a_1..a_m, b_1..b_m]`` of one coordinate of one shape. Returns (c, n)."""
+        rows = np.ascontiguousarray(np.asarray(frame_cols, dtype=np.float64).T)
+        a_rows = None if anchor_cols is None else np.ascontiguousarray(np.asarray(anchor_cols).T)
+        e_rows = None if extra_cols is None else np.ascontiguousarray(np.asarray(extra_cols).T)
+        return self.solve_frame_rows(rows, a_rows, e_rows).T
+
+    def solve_frame_rows(self, frame_rows: np.ndarray, anchor_rows: np.ndarray | None = None,
+                         extra_rows: np.ndarray | None = None) -> np.ndarray:
+        """The transposed layout of :meth:`solve_frame_columns`: frame_rows (2m, c), anchor_rows
+        (a, c), extra_rows (r, c) -> (n, c). With C-contiguous inputs nothing is copied: the
+        right-hand sides are one sparse-times-dense product ``(E^T C S) frame_rows``."""
+        rhs = self._frame_operator() @ frame_rows
+        return self._solve_rhs(rhs, None if anchor_rows is None else anchor_rows.T,
+                               None if extra_rows is None else extra_rows.T, transposed=True)
+
+    def _solve_rhs(self, rhs: np.ndarray, anchor_cols, extra_cols, transposed: bool = False) -> np.ndarray:
+        """Solve for right-hand sides rhs (n, c); returns (c, n), or (n, c) if ``transposed``."""
+        c = rhs.shape[1]
         if self.extra_rows is not None:
             if extra_cols is None:
                 raise InputError("extra_targets: expected targets for the extra (virtual edge) rows, found none")
@@ -199,5 +237,8 @@ class EdgePoisson:
         out = np.empty((self.n_vertices, c))
         a_vals = np.zeros((len(self.anchors), c)) if anchor_cols is None else np.asarray(anchor_cols).T
         out[self.anchors] = a_vals
-        out[self.free] = self._solve_free(rhs[self.free] - self._L_fa @ a_vals)
-        return out.T
+        b = rhs[self.free]
+        if anchor_cols is not None:
+            b -= self._L_fa @ np.ascontiguousarray(a_vals)
+        out[self.free] = self._solve_free(b)
+        return out if transposed else out.T

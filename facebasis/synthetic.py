@@ -93,7 +93,8 @@ def make_person_problem(template: Rig, truth: Rig, exclusive, n_train=20, n_held
     rng = np.random.default_rng(seed + 1000)
     pairs = [tuple(template.index([a, b])) for a, b in exclusive]
     Xt = sparse_weights(rng, n_train, template.n_shapes, pairs)
-    Xh = sparse_weights(rng, n_heldout, template.n_shapes, pairs, cover=False)
+    # held-out expressions from their own stream: the same for any number of training expressions
+    Xh = sparse_weights(np.random.default_rng(seed + 2000), n_heldout, template.n_shapes, pairs, cover=False)
     rough = np.clip(Xt + rng.uniform(-noise, noise, Xt.shape), 0.0, 1.0)
     problem = GenerationProblem(template, truth.neutral, truth.evaluate(Xt), rough,
                                 tuple(f"ex{j:02d}" for j in range(n_train)), tuple(exclusive))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import InputError
-from .gradients import edge_columns_to_rows, frames_cm, triangle_frames
+from .gradients import frames_cm, triangle_frames
 from .mesh import validate_mesh, validate_vertices
 from .poisson import EdgePoisson, choose_anchors
 from .rig import Rig
@@ -93,7 +93,9 @@ class DeformationTransfer:
         a_cols = None
         if anchor_values is not None:  # (k, a, 3) -> (k*3, a)
             a_cols = np.moveaxis(anchor_values, 2, 1).reshape(k * 3, -1)
-        out = self.poisson.solve_columns(edge_columns_to_rows(frame_deltas), a_cols, extra_cols)
+        m = frame_deltas.shape[-1]
+        cols = np.ascontiguousarray(frame_deltas, dtype=np.float64).reshape(k * 3, 2 * m)
+        out = self.poisson.solve_frame_columns(cols, a_cols, extra_cols)
         return np.moveaxis(out.reshape(k, 3, -1), 1, 2)
 
     def anchor_values(self, deltas: np.ndarray | None = None) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,all} [--repeat N]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,all} [--repeat N]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -60,9 +60,11 @@ def bench_transfer(repeat: int) -> dict:
 
 
 def bench_rig(repeat: int) -> dict:
+    import dataclasses
+
     import numpy as np
 
-    from facebasis.generation import generate_blendshapes, reproduction_error
+    from facebasis.generation import GenerationOptions, generate_blendshapes, reproduction_error
     from facebasis.transfer import deformation_transfer
     from facebasis.weights import WeightSolver
     from problems.generation import ict_person_problem
@@ -88,22 +90,72 @@ def bench_rig(repeat: int) -> dict:
     tpl = p.template.with_neutral(p.target_neutral, p.template.deltas)
     solver = WeightSolver(k, len(pp.heldout), p.pair_indices)
     out = {}
-    print("  held-out expressions (weights refitted, bounds + complementarity, no prior):")
+    print("  held-out expressions, seed 0 (weights refitted, bounds + complementarity, no prior):")
     for name, rig in (("template deltas unchanged", tpl), ("deformation transfer", dt), ("example-based", res.rig)):
         err = reproduction_error(rig, pp.heldout, p.pair_indices, solver=solver)
         shape_err = np.linalg.norm(rig.deltas - pp.truth.deltas, axis=(1, 2)) / np.linalg.norm(pp.truth.deltas, axis=(1, 2))
         out[name] = err
         print(f"    {name:26s} relative error {err:.4f}; per-shape error vs truth: median {np.median(shape_err):.3f}, "
               f"max {shape_err.max():.3f} ({p.template.names[int(shape_err.argmax())]})")
-    print(f"  ratio example-based / deformation transfer on held-out: {out['example-based'] / out['deformation transfer']:.3f}"
-          "  [target <= 0.5]")
     print(f"  training fit (relative residual): median {np.median(res.residuals):.4f}, max {res.residuals.max():.4f}; "
           f"weight error mean |x - x_true| {np.abs(res.weights - pp.true_weights).mean():.4f} "
           f"(initial {np.abs(p.initial_weights - pp.true_weights).mean():.4f})")
+    print("  held-out error / deformation transfer's, three person problems  [target <= 0.5 with 20 training]:")
+    print(f"    {'seed':>4s} {'DT error':>9s} {'20 train':>9s} {'20, true x fixed':>17s} {'80 train':>9s}")
+    ratios = []
+    for seed in (0, 1, 2):
+        row = []
+        for n_train, oracle in ((20, False), (20, True), (80, False)):
+            q = ict_person_problem(seed=seed, n_train=n_train)
+            prob, opts = q.problem, GenerationOptions()
+            if oracle:  # the true weights, held fixed: what the basis step can learn from these examples
+                prob = dataclasses.replace(prob, initial_weights=q.true_weights)
+                opts = GenerationOptions(lam=(1e8, 1e8))
+            rig = generate_blendshapes(prob, opts).rig
+            e_dt = reproduction_error(deformation_transfer(prob.template, prob.target_neutral), q.heldout,
+                                      prob.pair_indices, solver=solver)
+            row.append(reproduction_error(rig, q.heldout, prob.pair_indices, solver=solver) / e_dt)
+        ratios.append(row)
+        print(f"    {seed:4d} {e_dt:9.4f} {row[0]:9.3f} {row[1]:17.3f} {row[2]:9.3f}")
+    out["ratio_20"] = [r[0] for r in ratios]
     return out
 
 
-BENCHES = {"transfer": bench_transfer, "rig": bench_rig}
+def bench_weights(repeat: int) -> dict:
+    """The weight-problem suite: certified solver timing and the IPOPT formulation comparison."""
+    import numpy as np
+
+    from facebasis.formulations import compare_formulations, summarise_comparison
+    from problems.weights_suite import weight_suite
+
+    suite = weight_suite("ict")
+    ict = [i for i in suite if i.k == 53]
+    print(f"weights: suite of {len(suite)} instances ({len(ict)} with 53 ICT shapes and "
+          f"{max(len(i.pairs) for i in ict)} exclusive pairs)")
+    times, nodes = [], []
+    for inst in ict:
+        best = min((inst.certify() for _ in range(max(1, repeat))), key=lambda c: c.seconds)
+        times.append(best.seconds)
+        nodes.append(best.nodes)
+    order = np.argsort(times)[::-1]
+    print(f"  certified branch and bound per example: median {1e3 * np.median(times):.1f} ms, max "
+          f"{1e3 * max(times):.1f} ms ({ict[order[0]].name}, {nodes[order[0]]} nodes), "
+          f"{sum(t <= 0.05 for t in times)}/{len(times)} within 50 ms  [target <= 50 ms]; nodes median "
+          f"{int(np.median(nodes))}, max {max(nodes)}")
+    slow = [f"{ict[i].name} {1e3 * times[i]:.0f} ms" for i in order if times[i] > 0.05]
+    if slow:
+        print(f"  over 50 ms: {', '.join(slow)}")
+    rows = compare_formulations(suite)
+    print(f"  {'method':11s} {'reached':>9s} {'worst gap':>10s} {'min gap':>10s} {'max|xa xb|':>10s} "
+          f"{'bound viol':>10s} {'median ms':>9s} {'max ms':>8s}  IPOPT statuses")
+    for r in summarise_comparison(rows):
+        print(f"  {r['method']:11s} {r['reached']:4d}/{r['instances']:<4d} {r['worst_relative_gap']:10.2e} "
+              f"{r['most_negative_gap']:10.2e} {r['max_complementarity']:10.1e} {r['max_bound_violation']:10.1e} "
+              f"{r['median_ms']:9.1f} {r['max_ms']:8.1f}  {r['statuses']}")
+    return {"certified_max_ms": 1e3 * max(times)}
+
+
+BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights}
 
 
 def main(argv=None) -> int:

@@ -99,3 +99,52 @@ def test_rig_cli_other_errors(rig_inputs, tmp_path, capsys):
     assert main(args(root, **{"--out": tmp_path / "o", "--examples": ex})) == 2
     assert "ex00.obj: expected 4497 vertices as in template" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def _run_rig(root, out):
+    code = main(args(root, **{"--out": root / out}) + ["--exclusive", "mouthLeft:mouthRight",
+                                                       "mouthSmile_L:mouthFrown_L"])
+    assert code == 0
+    return root / out
+
+
+def test_verify_certifies_a_rig_run(rig_inputs, capsys):
+    root, pp = rig_inputs
+    run = _run_rig(root, "verified")
+    capsys.readouterr()
+    assert main(["verify", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert f"all {len(pp.problem.example_names)} stored answers are certified optimal" in out
+    assert out.count(" optimal") >= len(pp.problem.example_names)
+
+
+def test_verify_flags_a_stored_answer_that_is_not_optimal(rig_inputs, capsys):
+    import shutil
+
+    root, pp = rig_inputs
+    run = _run_rig(root, "tampered")
+    bad = root / "tampered_copy"
+    shutil.copytree(run, bad)
+    w = json.loads((bad / "weights.json").read_text())
+    first = sorted(w)[0]
+    w[first] = {k: min(1.0, v + 0.2) for k, v in w[first].items()}  # feasible, but no longer optimal
+    (bad / "weights.json").write_text(json.dumps(w))
+    capsys.readouterr()
+    assert main(["verify", str(bad)]) == 1
+    captured = capsys.readouterr()
+    assert f"NOT OPTIMAL: 1 of {len(w)} stored answers ({first})" in captured.err
+    # a stored answer that breaks a complementarity pair is flagged even if its objective is lower
+    w = json.loads((run / "weights.json").read_text())
+    w[first]["mouthLeft"] = w[first]["mouthRight"] = 0.5
+    (bad / "weights.json").write_text(json.dumps(w))
+    assert main(["verify", str(bad)]) == 1
+
+
+def test_verify_needs_the_inputs_record(rig_inputs, tmp_path, capsys):
+    root, _ = rig_inputs
+    assert main(["verify", str(root / "template")]) == 2
+    assert "expected inputs.json (written by `facebasis rig`), found no such file" in capsys.readouterr().err
+    run = _run_rig(root, "broken")
+    (run / "inputs.json").write_text("{not json")
+    assert main(["verify", str(run)]) == 2
+    assert "expected keys examples, weights, exclusive, final_lambda" in capsys.readouterr().err

@@ -1,0 +1,178 @@
+"""IPOPT formulations of the complementarity constraints of eq. 5 (seed 000), for comparison.
+
+One example's weight problem (see :mod:`facebasis.certify`)
+
+    min_x  x^T (G + lambda I) x - 2 (c + lambda x~)^T x + const,   0 <= x <= 1,   x_a x_b = 0
+
+is handed to IPOPT in CasADi in one of these forms (each built once, parametric in G, c, x~,
+lambda and its own parameter, and reused for every instance of the same size and pairs):
+
+``equality``
+    ``x_a x_b = 0`` as an equality constraint (the paper's literal form; no constraint
+    qualification holds at any feasible point, so IPOPT's multipliers are unbounded).
+``inequality``
+    ``x_a x_b <= 0``: equivalent given the bounds, one-sided for IPOPT's barrier.
+``scholtes``
+    ``x_a x_b <= eps`` with eps = 1e-1, 1e-2, ..., 1e-8, each solve warm-started from the last
+    (Scholtes 2001); the relaxed problems satisfy MFCQ.
+``penalty``
+    ``f + rho sum x_a x_b`` (only bounds as constraints), rho = 1, 10, ... until the pairs hold to
+    1e-9 or rho = 1e8 (an exact penalty for MPCCs, Ralph & Wright 2004).
+
+The certified optimum from :func:`facebasis.certify.certified_weights` is the yardstick.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .weights import IPOPT_OK
+
+FORMULATIONS = ("equality", "inequality", "scholtes", "penalty")
+SCHOLTES_EPS = tuple(10.0 ** -e for e in range(1, 9))
+PENALTY_RHO = tuple(10.0 ** e for e in range(0, 9))
+
+
+@dataclass(frozen=True)
+class FormulationResult:
+    """One IPOPT formulation on one instance: raw answer x (k,), eq. 5 objective there, IPOPT
+    statuses of every solve, total IPOPT iterations, violations and wall time."""
+
+    formulation: str
+    x: np.ndarray
+    objective: float
+    statuses: tuple[str, ...]
+    iterations: int
+    max_complementarity: float
+    max_bound_violation: float
+    seconds: float
+
+    @property
+    def success(self) -> bool:
+        return all(s in IPOPT_OK for s in self.statuses)
+
+
+class FormulationSolver:
+    """CasADi/IPOPT model of one example's weight problem in a given formulation, built once."""
+
+    def __init__(self, k: int, pairs, formulation: str = "equality", ipopt_options: dict | None = None):
+        import casadi as ca
+
+        from .errors import InputError
+
+        if formulation not in FORMULATIONS:
+            raise InputError(f"formulation: expected one of {FORMULATIONS}, found {formulation!r}")
+        self.k, self.formulation = int(k), formulation
+        self.pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        P = self.pairs
+        x = ca.MX.sym("x", k)
+        G = ca.MX.sym("G", k, k)
+        c = ca.MX.sym("c", k)
+        xp = ca.MX.sym("xp", k)
+        lam = ca.MX.sym("lam")
+        par = ca.MX.sym("par")  # eps (scholtes) or rho (penalty); unused otherwise
+        # eq. 5 for one example, without its constant: x^T G x - 2 c^T x + lambda ||x - x~||^2
+        f = ca.dot(x, ca.mtimes(G, x)) - 2 * ca.dot(c, x) + lam * ca.sumsqr(x - xp)
+        prod = x[P[:, 0].tolist()] * x[P[:, 1].tolist()] if len(P) else ca.MX.zeros(0)
+        nlp = {"x": x, "p": ca.vertcat(ca.vec(G), c, xp, lam, par)}
+        if formulation == "penalty":
+            nlp["f"] = f + par * ca.sum1(prod) if len(P) else f
+        else:
+            nlp["f"] = f
+            if len(P):
+                nlp["g"] = prod
+        opts = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10, "max_iter": 3000}}
+        opts["ipopt"].update(ipopt_options or {})
+        self._solver = ca.nlpsol(f"weights_{formulation}", "ipopt", nlp, opts)
+
+    def solve(self, G, c, const, prior, lam: float, x0=None) -> FormulationResult:
+        t0 = time.perf_counter()
+        k, P = self.k, self.pairs
+        prior = np.asarray(prior, float)
+        x = np.clip(prior if x0 is None else np.asarray(x0, float), 0.0, 1.0)
+        base = np.concatenate([np.asarray(G, float).ravel(order="F"), np.asarray(c, float), prior, [lam]])
+        statuses, iters = [], 0
+
+        def run(par, ubg):
+            nonlocal x, iters
+            args = {"x0": x, "p": np.append(base, par), "lbx": 0.0, "ubx": 1.0}
+            if len(P) and self.formulation != "penalty":
+                args.update(lbg=-np.inf if self.formulation != "equality" else 0.0, ubg=ubg)
+            sol = self._solver(**args)
+            st = self._solver.stats()
+            statuses.append(str(st.get("return_status", "unknown")))
+            iters += int(st.get("iter_count", 0))
+            x = np.asarray(sol["x"]).reshape(k)
+
+        if self.formulation in ("equality", "inequality") or not len(P):
+            run(0.0, 0.0)
+        elif self.formulation == "scholtes":
+            for eps in SCHOLTES_EPS:
+                run(eps, eps)
+        else:
+            for rho in PENALTY_RHO:
+                run(rho, 0.0)
+                if np.max(np.abs(x[P[:, 0]] * x[P[:, 1]])) <= 1e-9:
+                    break
+        G = np.asarray(G, float)
+        obj = float(x @ G @ x - 2 * np.asarray(c, float) @ x + const + lam * np.sum((x - prior) ** 2))
+        comp = float(np.max(np.abs(x[P[:, 0]] * x[P[:, 1]]))) if len(P) else 0.0
+        bnd = float(max(0.0, -x.min(), x.max() - 1.0))
+        return FormulationResult(self.formulation, x, obj, tuple(statuses), iters, comp, bnd, time.perf_counter() - t0)
+
+
+__all__ = ["FORMULATIONS", "FormulationResult", "FormulationSolver"]
+
+
+def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 1e-6, progress=None) -> list[dict]:
+    """Solve every instance (:class:`facebasis.certify.WeightInstance`) with the certified solver and
+    with each IPOPT formulation; one row per (instance, method) as plain dicts (a results table).
+
+    Columns: instance, kind, method, objective, certified_objective, relative_gap (method minus
+    certified, over max(1, |certified|)), reached (|gap| <= rel_tol), max_complementarity,
+    max_bound_violation, seconds, statuses, iterations, nodes (certified only).
+    """
+    solvers: dict = {}
+    rows = []
+    for n, inst in enumerate(instances):
+        cs = inst.certify()
+        base = {"instance": inst.name, "kind": inst.kind, "certified_objective": cs.objective}
+        rows.append({**base, "method": "certified", "objective": cs.objective, "relative_gap": 0.0, "reached": True,
+                     "max_complementarity": cs.max_complementarity, "max_bound_violation": cs.max_bound_violation,
+                     "seconds": cs.seconds, "statuses": "", "iterations": 0, "nodes": cs.nodes})
+        for form in formulations:
+            key = (form, inst.k, inst.pairs.tobytes())
+            if key not in solvers:
+                solvers[key] = FormulationSolver(inst.k, inst.pairs, form)
+            r = solvers[key].solve(inst.G, inst.c, inst.const, inst.prior, inst.lam)
+            gap = (r.objective - cs.objective) / max(1.0, abs(cs.objective))
+            rows.append({**base, "method": form, "objective": r.objective, "relative_gap": gap,
+                         "reached": abs(gap) <= rel_tol, "max_complementarity": r.max_complementarity,
+                         "max_bound_violation": r.max_bound_violation, "seconds": r.seconds,
+                         "statuses": ";".join(sorted(set(r.statuses))), "iterations": r.iterations, "nodes": 0})
+        if progress is not None:
+            progress(n + 1, len(instances))
+    return rows
+
+
+def summarise_comparison(rows) -> list[dict]:
+    """Per method: instances, reached optimum (count), worst gap, worst violations, median and max
+    time, IPOPT statuses seen."""
+    out = []
+    for method in dict.fromkeys(r["method"] for r in rows):
+        rs = [r for r in rows if r["method"] == method]
+        statuses = sorted({s for r in rs for s in r["statuses"].split(";") if s})
+        out.append({"method": method, "instances": len(rs), "reached": sum(r["reached"] for r in rs),
+                    "worst_relative_gap": max(r["relative_gap"] for r in rs),
+                    "most_negative_gap": min(r["relative_gap"] for r in rs),
+                    "max_complementarity": max(r["max_complementarity"] for r in rs),
+                    "max_bound_violation": max(r["max_bound_violation"] for r in rs),
+                    "median_ms": 1e3 * float(np.median([r["seconds"] for r in rs])),
+                    "max_ms": 1e3 * max(r["seconds"] for r in rs), "statuses": ", ".join(statuses)})
+    return out
+
+
+__all__ += ["compare_formulations", "summarise_comparison"]

@@ -1,0 +1,124 @@
+"""``facebasis verify RUN_DIR``: re-solve a rig run's weight problems to certified optima.
+
+A ``facebasis rig`` output folder holds the generated blendshapes (``neutral.obj`` + one OBJ per
+shape), the solved weights (``weights.json``) and ``inputs.json``, which records where the
+training expressions and rough weights came from, the exclusive pairs and the final lambda. The
+last weight step of the run solved eq. 5 of seed 000 for exactly these blendshapes, so every
+stored weight vector should be the global optimum of its example's problem
+
+    min_x ||B x - t_j||^2 + lambda ||x - x~_j||^2,   0 <= x <= 1,   x_a x_b = 0.
+
+This module recomputes the Gram data from the meshes on disk, solves each example with
+:func:`facebasis.certify.certified_weights`, and reports per example the objective gap of the
+stored weights, their complementarity and bound residuals and a verdict.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .certify import certified_weights, weight_objective
+from .errors import InputError
+
+INPUTS_FILE = "inputs.json"
+
+
+@dataclass(frozen=True)
+class ExampleVerdict:
+    name: str
+    stored_objective: float
+    certified_objective: float
+    relative_gap: float        # (stored - certified) / max(1, |certified|)
+    max_complementarity: float
+    max_bound_violation: float
+    nodes: int
+    ok: bool
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    run_dir: str
+    lam: float
+    tolerance: float
+    examples: tuple[ExampleVerdict, ...]
+
+    @property
+    def ok(self) -> bool:
+        return all(e.ok for e in self.examples)
+
+    def table(self) -> str:
+        head = f"{'example':16s} {'stored':>14s} {'certified':>14s} {'rel. gap':>10s} {'max|xa xb|':>10s} " \
+               f"{'bound viol.':>11s} {'nodes':>6s}  verdict"
+        rows = [head]
+        for e in self.examples:
+            rows.append(f"{e.name:16s} {e.stored_objective:14.8g} {e.certified_objective:14.8g} {e.relative_gap:10.2e} "
+                        f"{e.max_complementarity:10.1e} {e.max_bound_violation:11.1e} {e.nodes:6d}  "
+                        f"{'optimal' if e.ok else 'NOT OPTIMAL'}")
+        return "\n".join(rows)
+
+
+def write_inputs(stage: Path, examples_dir, weights_file, exclusive, final_lambda: float, relative_to=None) -> None:
+    """Record a run's inputs (``inputs.json``) so that :func:`verify_run` can re-solve it later.
+
+    Paths are stored absolute, or relative to ``relative_to`` (the run folder's final location)
+    when given, so a self-contained folder can be moved.
+    """
+    from .atomic import atomic_write_json
+
+    def rel(p):
+        p = Path(p).resolve()
+        return os.path.relpath(p, Path(relative_to).resolve()) if relative_to is not None else str(p)
+
+    atomic_write_json(stage / INPUTS_FILE, {"examples": rel(examples_dir), "weights": rel(weights_file),
+                                            "exclusive": [list(p) for p in exclusive],
+                                            "final_lambda": float(final_lambda)})
+
+
+def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-8) -> VerifyReport:
+    """Certify the stored weights of a ``facebasis rig`` output folder (see module docstring)."""
+    from .examples import load_examples, load_weights, parse_pairs
+    from .rig import load_rig_folder
+
+    run = Path(run_dir)
+    path = run / INPUTS_FILE
+    if not path.is_file():
+        raise InputError(f"{run}: expected {INPUTS_FILE} (written by `facebasis rig`), found no such file")
+    try:
+        inputs = json.loads(path.read_text())
+        examples_dir, weights_file = inputs["examples"], inputs["weights"]
+        exclusive, lam = inputs["exclusive"], float(inputs["final_lambda"])
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: expected keys examples, weights, exclusive, final_lambda, found an unreadable "
+                         f"file ({exc})") from exc
+    examples_dir = (run / examples_dir) if not Path(examples_dir).is_absolute() else Path(examples_dir)
+    weights_file = (run / weights_file) if not Path(weights_file).is_absolute() else Path(weights_file)
+    rig = load_rig_folder(run, "neutral.obj")
+    names, T = load_examples(examples_dir, rig)
+    prior = load_weights(weights_file, names, rig.names)
+    stored = load_weights(run / "weights.json", names, rig.names)
+    pairs = np.array([rig.index([a, b]) for a, b in parse_pairs([f"{a}:{b}" for a, b in exclusive])],
+                     dtype=np.int64).reshape(-1, 2)
+    B = rig.deltas.reshape(rig.n_shapes, -1)
+    targets = (T - rig.neutral).reshape(len(T), -1)
+    G = B @ B.T
+    C = B @ targets.T
+    out = []
+    for j, name in enumerate(names):
+        const = float(targets[j] @ targets[j])
+        cs = certified_weights(G, C[:, j], const, pairs, prior[j], lam, start=stored[j])
+        x = stored[j]
+        f = weight_objective(x, G, C[:, j], const, prior[j], lam)
+        comp = float(np.max(np.abs(x[pairs[:, 0]] * x[pairs[:, 1]]))) if len(pairs) else 0.0
+        bound = float(max(0.0, -x.min(), x.max() - 1.0))
+        gap = (f - cs.objective) / max(1.0, abs(cs.objective))
+        ok = gap <= tolerance and comp <= residual_tolerance and bound <= residual_tolerance
+        out.append(ExampleVerdict(name, f, cs.objective, gap, comp, bound, cs.nodes, ok))
+    return VerifyReport(str(run), lam, tolerance, tuple(out))
+
+
+__all__ = ["ExampleVerdict", "VerifyReport", "verify_run", "write_inputs", "INPUTS_FILE"]

@@ -21,6 +21,32 @@ def _add_rig_folder_args(p: argparse.ArgumentParser) -> None:
                    help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
 
 
+def _virtual_edges_for(args, template):
+    """``--virtual-edges [EDGES.json]``: read the file, or detect on the template's neutral."""
+    if args.virtual_edges is None:
+        return None
+    from .virtual_edges import VirtualEdges, detect_virtual_edges
+
+    if args.virtual_edges == "detect":
+        ve = detect_virtual_edges(template.neutral, template.faces, name=f"template {template.source}")
+        print(f"virtual edges: {len(ve)} detected on the template neutral in {ve.seconds:.2f} s")
+        return ve
+    ve = VirtualEdges.read(args.virtual_edges, template.n_vertices)
+    print(f"virtual edges: {len(ve)} from {args.virtual_edges}")
+    return ve
+
+
+def _add_virtual_edge_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--virtual-edges", nargs="?", const="detect", default=None, metavar="EDGES.json",
+                   help="add the virtual-edge energy against penetration (seed 004); without a file the "
+                        "edges are detected on the template neutral with the default parameters")
+    p.add_argument("--virtual-weight", type=float, default=None,
+                   help="weight of the virtual-edge energy (default: facebasis.virtual_edges.DEFAULT_VIRTUAL_WEIGHT)")
+    p.add_argument("--virtual-mode", choices=("proportional", "gradient"), default="proportional",
+                   help="virtual-edge targets: the template's gap motion scaled down to a thinner target "
+                        "gap (proportional, default) or the local gradient only (gradient)")
+
+
 def cmd_transfer(args) -> int:
     from .atomic import atomic_directory
     from .rig import load_rig_folder, load_target_neutral, write_shapes
@@ -28,8 +54,10 @@ def cmd_transfer(args) -> int:
 
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
+    ve = _virtual_edges_for(args, template)
     t0 = time.perf_counter()
-    result = DeformationTransfer(template, target).transfer()
+    result = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,
+                                 virtual_mode=args.virtual_mode).transfer()
     seconds = time.perf_counter() - t0
     with atomic_directory(args.out) as stage:
         write_shapes(stage, result)
@@ -61,12 +89,14 @@ def cmd_rig(args) -> int:
 
     # everything is validated before any solving starts
     options = GenerationOptions(iterations=args.iterations, alpha=_pair_of_floats(args.alpha, "--alpha"),
-                                lam=_pair_of_floats(args.lam, "--lambda"))
+                                lam=_pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
+                                virtual_mode=args.virtual_mode)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
-    problem = GenerationProblem(template, target, examples, X0, names, parse_pairs(args.exclusive))
+    ve = _virtual_edges_for(args, template)
+    problem = GenerationProblem(template, target, examples, X0, names, parse_pairs(args.exclusive), ve)
     print(f"template {template.n_shapes} shapes, {template.n_vertices} vertices; {len(names)} training "
           f"expressions; {len(problem.exclusive)} exclusive pairs")
     gen = BlendshapeGenerator(problem, options)
@@ -96,6 +126,53 @@ def cmd_rig(args) -> int:
               f"{result.residuals[names.index(name)]:.3f} > {options.missing_threshold}: the template "
               "may lack a shape it needs (missing expression)", file=sys.stderr)
     print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
+    return 0
+
+
+def cmd_virtual_edges(args) -> int:
+    from .meshio import read_mesh
+    from .penetration import parse_region
+    from .virtual_edges import detect_virtual_edges
+
+    V, F = read_mesh(args.mesh, check_degenerate=True)
+    mask = parse_region(args.region, len(V)) if args.region else None
+    ve = detect_virtual_edges(V, F, cap=args.cap, ratio=args.ratio, per_vertex=args.per_vertex,
+                              spacing=args.spacing, vertex_mask=mask, name=str(args.mesh))
+    ve.write(args.out)
+    print(f"{len(ve)} virtual edges ({ve.candidates} candidate pairs with distance < {ve.cap:.4g} and "
+          f"geodesic/Euclidean >= {ve.ratio:g}) in {ve.seconds:.2f} s -> {args.out}")
+    if args.figure:
+        from .figures import virtual_edges_figure
+
+        paths = virtual_edges_figure(V, F, ve.edges, Path(args.figure), title=f"{args.mesh}: {len(ve)} virtual edges")
+        print(f"figure -> {', '.join(map(str, paths))}")
+    return 0
+
+
+def cmd_penetration(args) -> int:
+    from .meshio import read_mesh
+    from .mesh import same_topology
+    from .penetration import parse_region, penetration_report, region_faces
+
+    V, F = read_mesh(args.mesh)
+    refs = []
+    for r in args.reference:
+        R, FR = read_mesh(r)
+        if len(R) != len(V):
+            from .errors import TopologyError
+
+            raise TopologyError(f"{r}: expected {len(V)} vertices as in {args.mesh}, found {len(R)}")
+        same_topology(F, FR, str(args.mesh), str(r))
+        refs.append(R)
+    face_mask = region_faces(F, parse_region(args.region, len(V))) if args.region else None
+    rep = penetration_report(V, F, refs, face_mask)
+    where = f" in region {args.region} ({int(face_mask.sum())} triangles)" if face_mask is not None else ""
+    print(f"{args.mesh}: {len(rep.pairs)} intersecting triangle pairs{where}")
+    if refs:
+        print(f"  new relative to {len(refs)} reference(s): {len(rep.new)}")
+    shown = rep.new if refs else rep.pairs
+    for a, b in shown[: args.show].tolist():
+        print(f"  triangles {a} {F[a].tolist()} x {b} {F[b].tolist()}")
     return 0
 
 
@@ -134,6 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_rig_folder_args(p)
     p.add_argument("--target", required=True, help="target neutral mesh (.obj/.ply), template topology")
     p.add_argument("--out", required=True, help="output folder: <shape>.obj for every template shape")
+    _add_virtual_edge_args(p)
     p.set_defaults(func=cmd_transfer)
 
     p = sub.add_parser("rig", help="example-based blendshape generation (seed 000)")
@@ -147,7 +225,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lambda", dest="lam", default="100,10", help="lambda schedule FIRST,LAST (default 100,10)")
     p.add_argument("--exclusive", nargs="*", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0)")
+    _add_virtual_edge_args(p)
     p.set_defaults(func=cmd_rig)
+
+    p = sub.add_parser("virtual-edges", help="detect virtual edges across thin layers (seed 004)")
+    p.add_argument("mesh", help="neutral mesh (.obj/.ply)")
+    p.add_argument("--out", required=True, help="output EDGES.json")
+    p.add_argument("--cap", type=float, default=None, help="Euclidean cap in mesh units (default 3.3 median edge lengths)")
+    p.add_argument("--ratio", type=float, default=2.0, help="geodesic/Euclidean floor (default 2)")
+    p.add_argument("--per-vertex", type=int, default=4, help="edges kept per vertex (default 4)")
+    p.add_argument("--spacing", type=float, default=None,
+                   help="exclusion radius around chosen ends, mesh units (default 0: no exclusion)")
+    p.add_argument("--region", default=None, metavar="START:END", help="only vertices START..END-1 as ends")
+    p.add_argument("--figure", default=None, metavar="PNG", help="also draw the edges over the mesh")
+    p.set_defaults(func=cmd_virtual_edges)
+
+    p = sub.add_parser("penetration", help="count intersecting triangle pairs exactly")
+    p.add_argument("mesh", help="mesh to check")
+    p.add_argument("--reference", action="append", default=[], metavar="REF",
+                   help="same-topology mesh whose intersecting pairs are not new (repeatable)")
+    p.add_argument("--region", default=None, metavar="START:END", help="only triangles with all vertices in START..END-1")
+    p.add_argument("--show", type=int, default=10, help="list this many pairs (default 10)")
+    p.set_defaults(func=cmd_penetration)
 
     p = sub.add_parser("verify", help="certify the stored weights of a `facebasis rig` output folder")
     p.add_argument("run_dir", help="output folder of `facebasis rig` (with inputs.json)")

@@ -115,3 +115,30 @@ def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path
     ax.legend(fontsize=7)
     fig.tight_layout()
     return save(fig, path, formats)
+
+
+def virtual_edges_figure(V, F, edges, path: Path, views=("front", "below"), title: str = "", formats=("png",)):
+    """The mesh with its virtual edges drawn as red segments, whole face and zoomed on the edges."""
+    from .render import project
+
+    plt = _pyplot()
+    E = np.asarray(edges, np.int64).reshape(-1, 2)
+    fig, axes = plt.subplots(1, 2 * len(views), figsize=(5.0 * 2 * len(views), 5.5), squeeze=False)
+    for col, view in enumerate(views):
+        P = project(V, view)
+        for j, zoom in enumerate((False, True)):
+            ax = axes[0, 2 * col + j]
+            crop = None
+            if zoom and len(E):
+                lo, hi = P[E.ravel(), :2].min(0), P[E.ravel(), :2].max(0)
+                pad = 0.08 * float((hi - lo).max())
+                crop = ((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad))
+            draw_mesh(ax, V, F, view=view, crop=crop)
+            if len(E):
+                seg = np.stack([P[E[:, 0], :2], P[E[:, 1], :2]], 1)
+                from matplotlib.collections import LineCollection
+
+                ax.add_collection(LineCollection(seg, colors=(0.85, 0.05, 0.05), linewidths=0.6 if zoom else 0.3))
+            ax.set_title(f"{view}{' (zoom)' if zoom else ''}", fontsize=9)
+    fig.suptitle(title or f"{len(E)} virtual edges", fontsize=10)
+    return save(fig, path, formats)

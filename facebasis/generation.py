@@ -61,6 +61,8 @@ class GenerationProblem:
     initial_weights : (m, k) rough weights ``x~`` in [0, 1]
     example_names : m names (e.g. file stems)
     exclusive : pairs of shape names that are mutually exclusive (complementarity)
+    virtual_edges : optional :class:`~facebasis.virtual_edges.VirtualEdges` (seed 004): their energy
+        joins every reconstruction of the basis step, with the deformation-transfer targets
     """
 
     template: Rig
@@ -69,6 +71,7 @@ class GenerationProblem:
     initial_weights: np.ndarray
     example_names: tuple[str, ...] = ()
     exclusive: tuple[tuple[str, str], ...] = ()
+    virtual_edges: object | None = None
 
     def __post_init__(self):
         t = self.template
@@ -106,6 +109,10 @@ class GenerationProblem:
         object.__setattr__(self, "initial_weights", X)
         object.__setattr__(self, "example_names", names)
         object.__setattr__(self, "exclusive", pairs)
+        ve = self.virtual_edges
+        if ve is not None and getattr(ve, "n_vertices", None) != t.n_vertices:
+            raise InputError(f"virtual_edges: expected edges for {t.n_vertices} vertices, found "
+                             f"{getattr(ve, 'n_vertices', type(ve).__name__)}")
 
     @property
     def pair_indices(self) -> np.ndarray:
@@ -131,6 +138,8 @@ class GenerationOptions:
     polish: bool = True
     ipopt_options: dict = field(default_factory=dict)
     threads: int | None = None
+    virtual_weight: float | None = None
+    virtual_mode: str = "proportional"
 
     def __post_init__(self):
         if int(self.iterations) < 1:
@@ -348,7 +357,10 @@ class BlendshapeGenerator:
         opts = self.options
         tpl = problem.template
         F = tpl.faces
-        self.dt = DeformationTransfer(tpl, problem.target_neutral)
+        self.dt = DeformationTransfer(tpl, problem.target_neutral, virtual_edges=problem.virtual_edges,
+                                      virtual_weight=opts.virtual_weight, virtual_mode=opts.virtual_mode)
+        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer
+        self.virtual_cols = self.dt.virtual_edge_cols()
         m_tri = len(F)
         # template frame deltas A_i^S - A_0^S (k, 3, 3, m_tri), computed once for eq. 3's prior and w_i
         dA = frames_cm(tpl.neutral + tpl.deltas, F)
@@ -375,7 +387,7 @@ class BlendshapeGenerator:
     def reconstruct(self, Y) -> np.ndarray:
         """Vertex deltas (k, n, 3) from the basis step's frame deltas Y (k, 6, m_tri)."""
         k, _, m_tri = Y.shape
-        return self.dt.solve_frame_deltas(Y.reshape(k, 3, 2, m_tri), self.anchor_values)
+        return self.dt.solve_frame_deltas(Y.reshape(k, 3, 2, m_tri), self.anchor_values, self.virtual_cols)
 
     def weight_step(self, deltas, lam, X0=None) -> WeightSolution:
         """Eq. 5 with blendshape deltas (k, n, 3) from :meth:`reconstruct`."""

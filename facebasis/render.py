@@ -17,6 +17,12 @@ def _rotation(elev_deg: float, azim_deg: float) -> np.ndarray:
     return Rx @ Ry
 
 
+def project(V, view="front") -> np.ndarray:
+    """View coordinates (n, 3) of points V under a named view or (elevation, azimuth)."""
+    elev, azim = VIEWS[view] if isinstance(view, str) else view
+    return np.asarray(V, float) @ _rotation(elev, azim).T
+
+
 def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vmax=None,
               face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72)):
     """Draw a shaded mesh into a matplotlib axis (camera looks along -z after the view rotation).

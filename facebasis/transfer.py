@@ -41,7 +41,11 @@ class DeformationTransfer:
     template : Rig, the source rig ``S_0, S_1..S_k``
     target_neutral : (n, 3) the target's neutral ``B_0`` in the template's topology
     anchors : optional (a,) anchor vertices (default :func:`rig_anchors`)
-    extra_rows, extra_weight : optional additional rows for :class:`EdgePoisson` (virtual edges)
+    extra_rows, extra_weight : optional additional rows for :class:`EdgePoisson`
+    virtual_edges : optional :class:`~facebasis.virtual_edges.VirtualEdges` (seed 004): adds the
+        virtual-edge energy ``virtual_weight * sum ||(x_v - x_u) - t_i||^2`` to the solve
+    virtual_weight : its weight (default :data:`~facebasis.virtual_edges.DEFAULT_VIRTUAL_WEIGHT`)
+    virtual_mode : ``"proportional"`` (default) or ``"gradient"`` targets (:func:`~facebasis.virtual_edges.virtual_edge_targets`)
 
     Examples
     --------
@@ -50,7 +54,8 @@ class DeformationTransfer:
     """
 
     def __init__(self, template: Rig, target_neutral: np.ndarray, anchors=None,
-                 extra_rows=None, extra_weight: float = 0.0):
+                 extra_rows=None, extra_weight: float = 0.0, virtual_edges=None,
+                 virtual_weight: float | None = None, virtual_mode: str = "proportional"):
         B0 = validate_vertices(target_neutral, "target neutral", template.n_vertices)
         validate_mesh(B0, template.faces, "target neutral")
         self.template = template
@@ -62,6 +67,25 @@ class DeformationTransfer:
         # M_t = (A_0^S)^-1 A_0^B[:, :2], so that Q_i A_0^B[:, :2] - A_0^B[:, :2] = (A_i^S - A_0^S) M
         self._M = np.ascontiguousarray(np.moveaxis(A0_inv @ np.moveaxis(self.target_frames[:, :2], -1, 0), 0, -1))
         self.anchors = rig_anchors(template) if anchors is None else np.asarray(anchors, dtype=np.int64)
+        self.virtual_edges = virtual_edges
+        self.virtual_mode = virtual_mode
+        if virtual_edges is not None:
+            from .virtual_edges import VIRTUAL_MODES
+
+            if virtual_mode not in VIRTUAL_MODES:
+                raise InputError(f"virtual edge mode: expected one of {VIRTUAL_MODES}, found {virtual_mode!r}")
+            from .virtual_edges import DEFAULT_VIRTUAL_WEIGHT
+
+            if extra_rows is not None:
+                raise InputError("DeformationTransfer: expected either virtual_edges or extra_rows, found both")
+            if virtual_edges.n_vertices != template.n_vertices:
+                raise InputError(f"virtual edges ({virtual_edges.source}): expected a mesh of {template.n_vertices} "
+                                 f"vertices, found edges for {virtual_edges.n_vertices}")
+            extra_weight = DEFAULT_VIRTUAL_WEIGHT if virtual_weight is None else float(virtual_weight)
+            if not (extra_weight > 0 and np.isfinite(extra_weight)):
+                raise InputError(f"virtual edge weight: expected a positive number, found {extra_weight}")
+            extra_rows = virtual_edges.operator() if len(virtual_edges) else None
+        self.virtual_weight = extra_weight
         self.poisson = EdgePoisson(F, template.n_vertices, self.anchors,
                                    extra_rows=extra_rows, extra_weight=extra_weight)
 
@@ -98,6 +122,18 @@ class DeformationTransfer:
         out = self.poisson.solve_frame_columns(cols, a_cols, extra_cols)
         return np.moveaxis(out.reshape(k, 3, -1), 1, 2)
 
+    def virtual_edge_cols(self, deltas: np.ndarray | None = None) -> np.ndarray | None:
+        """Targets of the virtual-edge rows for template shapes ``deltas`` (k, n, 3), laid out as
+        ``extra_cols`` (k*3, e) of :meth:`solve_frame_deltas`; None without virtual edges."""
+        if self.virtual_edges is None or self.poisson.extra_rows is None:
+            return None
+        from .virtual_edges import virtual_edge_targets
+
+        D = self.template.deltas if deltas is None else deltas
+        T = virtual_edge_targets(self.virtual_edges, self.template.neutral, D, self.target_neutral,
+                                 self.template.faces, self.virtual_mode)  # (k, e, 3)
+        return np.ascontiguousarray(np.moveaxis(T, 2, 1)).reshape(len(D) * 3, -1)
+
     def anchor_values(self, deltas: np.ndarray | None = None) -> np.ndarray:
         """Template deltas at the anchors, (k, a, 3): zero at still vertices."""
         D = self.template.deltas if deltas is None else deltas
@@ -106,16 +142,18 @@ class DeformationTransfer:
     def transfer(self, names=None) -> Rig:
         """Transfer every template shape (or those named) onto the target neutral."""
         idx = np.arange(self.template.n_shapes) if names is None else self.template.index(list(names))
-        if self.poisson.extra_rows is not None:
+        if self.poisson.extra_rows is not None and self.virtual_edges is None:
             raise InputError("transfer(): this transfer was built with extra rows; pass their targets to "
                              "solve_frame_deltas(..., extra_cols=...)")
         D = self.template.deltas[idx]
-        out = self.solve_frame_deltas(self.transferred_frame_deltas(D), self.anchor_values(D))
+        out = self.solve_frame_deltas(self.transferred_frame_deltas(D), self.anchor_values(D),
+                                      self.virtual_edge_cols(D))
         return Rig(self.target_neutral, self.template.faces,
                    tuple(self.template.names[i] for i in idx), out, source="deformation transfer")
 
 
-def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None) -> Rig:
+def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None, virtual_edges=None,
+                         virtual_weight: float | None = None, virtual_mode: str = "proportional") -> Rig:
     """Transfer every blendshape of ``template`` onto ``target_neutral`` (one-off call).
 
     Parameters
@@ -123,10 +161,13 @@ def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None
     template : Rig with neutral ``S_0`` (n, 3), faces (m, 3) and deltas (k, n, 3)
     target_neutral : (n, 3) ``B_0``, same topology and vertex order
     anchors : optional anchor vertices fixing each component's translation
+    virtual_edges, virtual_weight, virtual_mode : optional virtual-edge energy (seed 004), see
+        :class:`DeformationTransfer`
 
     Returns
     -------
     Rig with neutral ``B_0`` and the transferred deltas ``B_i - B_0``; transferring onto
     ``S_0`` itself returns the template's shapes.
     """
-    return DeformationTransfer(template, target_neutral, anchors).transfer()
+    return DeformationTransfer(template, target_neutral, anchors, virtual_edges=virtual_edges,
+                               virtual_weight=virtual_weight, virtual_mode=virtual_mode).transfer()

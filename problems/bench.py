@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,all} [--repeat N]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,virtual,all} [--repeat N]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -155,7 +155,83 @@ def bench_weights(repeat: int) -> dict:
     return {"certified_max_ms": 1e3 * max(times)}
 
 
-BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights}
+def bench_virtual(repeat: int) -> dict:
+    """Virtual edges on ICT: detection time, and new intersecting pairs over the 53 expressions
+    transferred onto a target outside the identity space (identity seed 0 scaled 3x)."""
+    import numpy as np
+
+    from facebasis.penetration import intersecting_pairs
+    from facebasis.transfer import DeformationTransfer
+    from facebasis.virtual_edges import detect_virtual_edges
+    from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
+
+    rig = ict_rig()
+    F = rig.faces
+    zones = ict_zones()
+    layered = zones["lips"] | zones["lids"]
+    times = []
+    for _ in range(max(1, repeat)):
+        ve_all = detect_virtual_edges(rig.neutral, F)
+        times.append(ve_all.seconds)
+    ve_mask = detect_virtual_edges(rig.neutral, F, vertex_mask=layered)
+    E = ve_all.edges
+    print(f"virtual: detection on the ICT neutral ({rig.n_vertices} vertices), defaults (cap {ve_all.cap:.3f} cm, "
+          f"ratio {ve_all.ratio:g}, {ve_all.per_vertex} per vertex): median {np.median(times):.3f} s, "
+          f"min {min(times):.3f} s over {len(times)} runs  [target <= 1 s]")
+    print(f"  {len(E)} edges from {ve_all.candidates} candidate pairs: {int(zones['lips'][E].all(1).sum())} in the "
+          f"lips zone, {int(zones['lids'][E].all(1).sum())} in the lids zone, "
+          f"{int((~layered[E]).any(1).sum())} with an end elsewhere; masked to lips + lids: {len(ve_mask)} edges")
+    c, _ = ict_random_identity(0)
+    B0 = ict_identity(3.0 * c)
+    neutral_pairs = set(map(tuple, intersecting_pairs(B0, F).tolist()))
+    template_pairs = [set(map(tuple, intersecting_pairs(rig.neutral + d, F).tolist())) for d in rig.deltas]
+
+    def new_pairs(result):
+        out = []
+        for i, d in enumerate(result.deltas):
+            P = set(map(tuple, intersecting_pairs(B0 + d, F).tolist())) - neutral_pairs - template_pairs[i]
+            P = np.array(sorted(P), dtype=np.int64).reshape(-1, 2)
+            lips = zones["lips"][F[P[:, 0]]].any(1) | zones["lips"][F[P[:, 1]]].any(1)
+            lids = ~lips & (zones["lids"][F[P[:, 0]]].any(1) | zones["lids"][F[P[:, 1]]].any(1))
+            out.append((len(P), int(lips.sum()), int(lids.sum())))
+        return np.array(out)
+
+    t0 = time.perf_counter()
+    plain = DeformationTransfer(rig, B0).transfer()
+    t_plain = time.perf_counter() - t0
+    base = new_pairs(plain)
+    print(f"  target: identity seed 0 scaled 3x ({len(neutral_pairs)} intersecting pairs in its neutral); new pairs = "
+          "not in the target neutral nor in the template shape (same triangles)")
+    print(f"  plain transfer ({t_plain:.2f} s): {base[:, 0].sum()} new pairs over {rig.n_shapes} expressions "
+          f"(lips {base[:, 1].sum()}, lids {base[:, 2].sum()}, elsewhere {base[:, 0].sum() - base[:, 1].sum() - base[:, 2].sum()})")
+    results = {}
+    outside = ~layered
+    for label, ve, mode, w in (("gradient, w 1", ve_all, "gradient", 1.0), ("gradient, w 3", ve_all, "gradient", 3.0),
+                               ("gradient, w 1, lips+lids mask", ve_mask, "gradient", 1.0),
+                               ("proportional, w 1", ve_all, "proportional", 1.0)):
+        t0 = time.perf_counter()
+        res = DeformationTransfer(rig, B0, virtual_edges=ve, virtual_weight=w, virtual_mode=mode).transfer()
+        secs = time.perf_counter() - t0
+        cnt = new_pairs(res)
+        diff = np.linalg.norm(res.deltas - plain.deltas, axis=2)
+        motion = np.linalg.norm(plain.deltas, axis=2)
+        rel_out = np.linalg.norm(diff[:, outside]) / np.linalg.norm(motion[:, outside])
+        red = 1.0 - cnt[:, 0].sum() / max(1, base[:, 0].sum())
+        results[label] = red
+        print(f"  {label:31s} ({secs:.2f} s): {cnt[:, 0].sum():5d} new pairs (lips {cnt[:, 1].sum()}, lids "
+              f"{cnt[:, 2].sum()}), {100 * red:5.1f}% fewer than plain [target >= 90%, none at the lids]; away from lips "
+              f"and lids: max difference to plain {diff[:, outside].max():.3f} cm, relative {rel_out:.3f}")
+    best = max(results, key=results.get)
+    print("  per expression, plain -> " + best + " (largest 12 by plain count):")
+    ve, mode, w = (ve_mask, "gradient", 1.0) if "mask" in best else (ve_all, best.split(",")[0],
+                                                                      float(best.split("w ")[1].split(",")[0]))
+    cnt = new_pairs(DeformationTransfer(rig, B0, virtual_edges=ve, virtual_weight=w, virtual_mode=mode).transfer())
+    order = np.argsort(-base[:, 0])[:12]
+    print("    " + ", ".join(f"{rig.names[i]} {base[i, 0]}->{cnt[i, 0]}" for i in order))
+    return results
+
+
+BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights, "virtual": bench_virtual}
 
 
 def main(argv=None) -> int:

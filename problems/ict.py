@@ -58,3 +58,34 @@ def ict_random_identity(seed: int = 0, scale: float = 1.0) -> tuple[np.ndarray, 
 def ict_regions() -> dict[str, tuple[int, int]]:
     d = _load()
     return {str(n): (int(a), int(b)) for n, (a, b) in zip(d["region_names"], d["region_ranges"])}
+
+
+def ict_zones(lip_radius: float = 1.2, lid_radius: float = 0.8) -> dict[str, np.ndarray]:
+    """Vertex masks (n,) of the thin layered zones of the ICT face, for locating penetrations.
+
+    ``lips``: face vertices within ``lip_radius`` cm of the 20 mouth landmarks (68-point indices
+    48-67) and the whole mouth socket; ``lids``: face vertices within ``lid_radius`` cm of the 12
+    eye landmarks (36-47) and both eye sockets.
+    """
+    from scipy.spatial import cKDTree
+
+    d = _load()
+    V = d["neutral"].astype(np.float64)
+    lm = d["landmarks68"].astype(np.int64)
+    reg = ict_regions()
+    face = np.zeros(len(V), bool)
+    face[slice(*reg["face"])] = True
+    tree = cKDTree(V)
+
+    def near(idx, r):
+        m = np.zeros(len(V), bool)
+        for hits in tree.query_ball_point(V[idx], r):
+            m[hits] = True
+        return m & face
+
+    lips = near(lm[48:68], lip_radius)
+    lips[slice(*reg["mouth_socket"])] = True
+    lids = near(lm[36:48], lid_radius)
+    lids[slice(*reg["eye_socket_left"])] = True
+    lids[slice(*reg["eye_socket_right"])] = True
+    return {"lips": lips, "lids": lids}

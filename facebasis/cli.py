@@ -191,6 +191,50 @@ def cmd_verify(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    from .report import report_run, sweep_report
+
+    target = Path(args.path)
+    formats = tuple(args.formats.split(","))
+    if target.suffix.lower() == ".csv":
+        from .studies import read_table
+
+        out = Path(args.out) if args.out else target.with_suffix("")
+        paths = sweep_report(read_table(target), out, formats)
+        if not paths:
+            from .errors import InputError
+
+            raise InputError(f"{target}: expected rows of at least one study, found none")
+    else:
+        paths = report_run(target, args.out, formats)
+    print(f"{len(paths)} files -> {paths[0].parent}")
+    return 0
+
+
+def cmd_sweep(args) -> int:
+    from .studies import STUDIES, run_tasks, study_tasks, write_table
+
+    studies = STUDIES if args.study == "all" else tuple(args.study.split(","))
+    seeds = tuple(int(s) for s in args.seeds.split(","))
+    tasks = [t for st in studies for t in study_tasks(st, args.problem, seeds)]
+    where = args.scheduler or f"a local Dask cluster of {args.workers or 'all'} worker processes"
+    print(f"{len(tasks)} tasks ({', '.join(studies)}) on problem {args.problem}, seeds {list(seeds)}, on {where}")
+    rows = run_tasks(tasks, scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+    write_table(rows, args.out)
+    print(f"results table ({len(rows)} rows) -> {args.out}; figures: facebasis report {args.out}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from .export import write_glb
+    from .rig import load_rig_folder
+
+    rig = load_rig_folder(args.rig, args.neutral, args.exclude)
+    out = write_glb(rig, args.out)
+    print(f"{rig.n_shapes} morph targets, {rig.n_vertices} vertices -> {out}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -247,6 +291,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--region", default=None, metavar="START:END", help="only triangles with all vertices in START..END-1")
     p.add_argument("--show", type=int, default=10, help="list this many pairs (default 10)")
     p.set_defaults(func=cmd_penetration)
+
+    p = sub.add_parser("report", help="figures of a `facebasis rig` folder or of a `facebasis sweep` table")
+    p.add_argument("path", help="rig output folder, or results .csv of `facebasis sweep`")
+    p.add_argument("--out", default=None, help="output folder (default: RUN_DIR/report, or the CSV's name)")
+    p.add_argument("--formats", default="png,pdf", help="figure formats (default png,pdf)")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("sweep", help="alpha / lambda / noise / method studies in parallel (Dask)")
+    p.add_argument("--problem", default="default", choices=("default", "ict"),
+                   help="person problem: the built-in face (default) or ICT (needs ../shared)")
+    p.add_argument("--study", default="all", help="alpha, lambda, grid, noise, methods, a comma list, or all")
+    p.add_argument("--seeds", default="0", help="problem seeds, comma separated (default 0)")
+    p.add_argument("--out", required=True, help="results table (.csv)")
+    p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
+    p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a `facebasis rig` output")
+    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="ignore matching files")
+    p.add_argument("--out", required=True, help="output .glb")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("verify", help="certify the stored weights of a `facebasis rig` output folder")
     p.add_argument("run_dir", help="output folder of `facebasis rig` (with inputs.json)")

@@ -7,7 +7,8 @@ Writes into one folder (atomically):
 * ``transfer/`` - deformation transfer of the template onto the person
 * ``rig/`` - example-based generation (seed 000) from 10 training expressions of the person with
   rough (noisy) weights: the generated blendshapes, ``weights.json``, ``history.json``,
-  ``inputs.json`` (``facebasis verify OUT/rig`` certifies its weights)
+  ``inputs.json`` (``facebasis verify OUT/rig`` certifies its weights) and ``rig.glb`` (glTF 2.0,
+  one morph target per blendshape)
 * ``rig_inputs/`` - those training expressions (OBJ) and rough weights
 * ``summary.json`` - figures of the run (times, errors against the person's true shapes)
 * ``figures/`` - renders, error maps and the convergence plot (PNG)
@@ -67,6 +68,9 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
 
         result = generate_blendshapes(pp.problem, options, progress)
         write_shapes(stage / "rig", result.rig)
+        from .export import write_glb
+
+        write_glb(result.rig, stage / "rig" / "rig.glb")  # glTF 2.0, one morph target per shape
         # the run's inputs as files, so `facebasis verify OUT/rig` can re-solve its weight step
         inputs = stage / "rig_inputs"
         for name, T in zip(pp.problem.example_names, pp.problem.examples):

@@ -92,7 +92,7 @@ def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path
     ax2.set_ylabel(r"$\alpha$")
     ax.legend(loc="upper right", fontsize=8)
     ax = axes[1]
-    ax.semilogy(i, [h["weight_objective"] for h in its], "o-", label="polished")
+    ax.semilogy(i, [h["weight_objective"] for h in its], "o-", label="certified (branch and bound)")
     ax.semilogy(i, [h["ipopt_objective"] for h in its], "x--", label="IPOPT")
     ax.set_xlabel("iteration")
     ax.set_ylabel("weight-step objective (eq. 5)")
@@ -104,8 +104,8 @@ def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path
     floor = 1e-20  # values at or below it (exact zeros included) are drawn on this floor
     for key, style, label in (("ipopt_max_complementarity", "x--", "IPOPT: max |x_a x_b|"),
                               ("ipopt_max_bound_violation", "+--", "IPOPT: bound violation"),
-                              ("max_complementarity", "o-", "polished: max |x_a x_b|"),
-                              ("max_bound_violation", "s:", "polished: bound violation")):
+                              ("max_complementarity", "o-", "certified: max |x_a x_b|"),
+                              ("max_bound_violation", "s:", "certified: bound violation")):
         ax.semilogy(i, [max(h[key], floor) for h in its], style, label=label, ms=4)
     ax.axhline(floor, color="0.6", lw=0.8)
     ax.text(i[0], floor * 3, "<= 1e-20 (incl. exact 0)", fontsize=7, color="0.4")

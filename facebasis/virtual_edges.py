@@ -211,7 +211,7 @@ def _parallel_groups(V, G, P, jobs, limit):
         ctx = mp.get_context("fork")
     except (AttributeError, ValueError):  # pragma: no cover - not Linux
         return None
-    if cores < 2:
+    if cores < 2 or mp.current_process().daemon:  # e.g. inside a Dask worker: no child processes
         return None
     _SHARED.update(V=V, G=G, P=P, jobs=jobs)
     try:

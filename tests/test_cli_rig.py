@@ -148,3 +148,20 @@ def test_verify_needs_the_inputs_record(rig_inputs, tmp_path, capsys):
     (run / "inputs.json").write_text("{not json")
     assert main(["verify", str(run)]) == 2
     assert "expected keys examples, weights, exclusive, final_lambda" in capsys.readouterr().err
+
+
+def test_rig_with_virtual_edges(rig_inputs, capsys):
+    """The virtual-edge energy joins the basis step's reconstruction; the run still reproduces the
+    training expressions (residuals recorded) and the edges are reported."""
+    root, pp = rig_inputs
+    code = main(args(root, **{"--out": root / "ve_run"}) + ["--virtual-edges", "--virtual-weight", "1"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "virtual edges:" in out and "detected on the template neutral" in out
+    res = json.loads((root / "ve_run" / "residuals.json").read_text())
+    plain = json.loads((root / "out" / "residuals.json").read_text()) if (root / "out").exists() else None
+    assert max(res["relative_residual"].values()) < 0.5
+    if plain is not None:  # the energy changes the rig (it is not ignored)
+        assert res["relative_residual"] != plain["relative_residual"]
+    hist = json.loads((root / "ve_run" / "history.json").read_text())
+    assert hist["options"]["virtual_weight"] == 1.0 and hist["options"]["virtual_mode"] == "proportional"

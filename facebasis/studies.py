@@ -1,0 +1,255 @@
+"""Optimisation studies over person problems: alpha, lambda, alpha x lambda, initial-weight noise,
+method comparison and penetration, run in parallel on Dask and written as one results table.
+
+Every task is a small frozen record (problem name, seed, settings); a worker builds the problem
+itself (cached per worker process), so nothing large travels between processes. Each task runs
+single-threaded: the parallelism is across tasks. Results come back in task order, so the table is
+the same whatever the scheduling. The report module (:mod:`facebasis.report`) only reads the table.
+
+Problems: ``default`` (the built-in face, :func:`facebasis.synthetic.default_face_problem`) and
+``ict`` (``problems.generation.ict_person_problem``, needs ``../shared``).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import os
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .errors import InputError
+
+STUDIES = ("alpha", "lambda", "grid", "noise", "methods")
+ALPHAS = tuple(float(a) for a in np.geomspace(0.01, 10.0, 10))
+LAMBDAS = tuple(float(v) for v in np.geomspace(0.1, 1000.0, 9))
+GRID_ALPHAS = tuple(float(a) for a in np.geomspace(0.01, 3.0, 6))
+GRID_LAMBDAS = tuple(float(v) for v in np.geomspace(0.1, 1000.0, 5))
+NOISES = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
+METHODS = ("template deltas", "deformation transfer", "vertex PCA", "example-based", "example-based + virtual edges")
+COLUMNS = ("study", "problem", "seed", "method", "alpha0", "alpha1", "lam0", "lam1", "noise", "noise_seed",
+           "heldout_error", "train_error", "shape_error", "rig_change", "seconds")
+
+
+@dataclass(frozen=True)
+class Task:
+    study: str
+    problem: str
+    seed: int
+    method: str = "example-based"
+    alpha: tuple[float, float] | None = None   # None: the default schedule
+    lam: tuple[float, float] | None = None
+    noise: float | None = None                 # None: the problem's own rough weights
+    noise_seed: int = 0
+
+
+@lru_cache(maxsize=4)
+def person_problem(name: str, seed: int):
+    """The person problem ``name`` (default / ict) for ``seed``, cached per process."""
+    if name == "default":
+        from .synthetic import default_face_problem
+
+        return default_face_problem(seed=seed, n_train=10, n_heldout=10)
+    if name == "ict":
+        try:
+            from problems.generation import ict_person_problem
+        except ImportError as exc:  # pragma: no cover - run from the repository root
+            raise InputError("problem 'ict': expected the repository's problems/ package on the path") from exc
+        return ict_person_problem(seed=seed)
+    raise InputError(f"problem: expected 'default' or 'ict', found {name!r}")
+
+
+def _rough(pp, noise: float, noise_seed: int) -> np.ndarray:
+    rng = np.random.default_rng(10_000 + noise_seed)
+    return np.clip(pp.true_weights + rng.uniform(-noise, noise, pp.true_weights.shape), 0.0, 1.0)
+
+
+@lru_cache(maxsize=4)
+def _reference_rig(name: str, seed: int):
+    """The rig generated from the true weights (noise 0): the reference of the noise study."""
+    from .generation import GenerationOptions, generate_blendshapes
+
+    pp = person_problem(name, seed)
+    p = dataclasses.replace(pp.problem, initial_weights=pp.true_weights)
+    return generate_blendshapes(p, GenerationOptions(threads=1)).rig
+
+
+def _pca_heldout(pp) -> tuple[float, float]:
+    """Vertex-space PCA baseline: the span of the training displacements (all m principal
+    components), held-out expressions fitted by unconstrained least squares in it."""
+    t0 = time.perf_counter()
+    p = pp.problem
+    D = (p.examples - p.target_neutral).reshape(len(p.examples), -1)
+    _, _, Vt = np.linalg.svd(D, full_matrices=False)
+    H = (pp.heldout - p.target_neutral).reshape(len(pp.heldout), -1)
+    resid = H - (H @ Vt.T) @ Vt
+    return float(np.linalg.norm(resid) / np.linalg.norm(H)), time.perf_counter() - t0
+
+
+def run_task(task: Task) -> dict:
+    """Run one task; returns one row of the results table (see :data:`COLUMNS`)."""
+    from threadpoolctl import threadpool_limits
+
+    from .generation import GenerationOptions, generate_blendshapes, reproduction_error
+    from .transfer import DeformationTransfer
+
+    with threadpool_limits(1):
+        pp = person_problem(task.problem, task.seed)
+        p = pp.problem
+        row = {c: "" for c in COLUMNS}
+        row.update(study=task.study, problem=task.problem, seed=task.seed, method=task.method,
+                   noise="" if task.noise is None else task.noise, noise_seed=task.noise_seed)
+        if task.noise is not None:
+            p = dataclasses.replace(p, initial_weights=_rough(pp, task.noise, task.noise_seed))
+        t0 = time.perf_counter()
+        if task.method == "vertex PCA":
+            err, secs = _pca_heldout(pp)
+            row.update(heldout_error=err, train_error=0.0, seconds=secs)
+            return row
+        if task.method == "template deltas":
+            rig = p.template.with_neutral(p.target_neutral, p.template.deltas)
+            train = None
+        elif task.method == "deformation transfer":
+            rig = DeformationTransfer(p.template, p.target_neutral).transfer()
+            train = None
+        else:
+            kw = {}
+            if task.alpha is not None:
+                kw["alpha"] = task.alpha
+            if task.lam is not None:
+                kw["lam"] = task.lam
+            opts = GenerationOptions(threads=1, **kw)
+            if task.method == "example-based + virtual edges":
+                from .virtual_edges import detect_virtual_edges
+
+                ve = detect_virtual_edges(p.template.neutral, p.template.faces)
+                p = dataclasses.replace(p, virtual_edges=ve)
+            res = generate_blendshapes(p, opts)
+            rig = res.rig
+            train = True
+            row.update(alpha0=opts.alpha[0], alpha1=opts.alpha[1], lam0=opts.lam[0], lam1=opts.lam[1])
+        secs = time.perf_counter() - t0
+        shape_err = np.linalg.norm(rig.deltas - pp.truth.deltas, axis=(1, 2)) / np.linalg.norm(pp.truth.deltas, axis=(1, 2))
+        # held-out and training expressions measured alike: weights refitted (bounds, pairs, no prior)
+        row.update(heldout_error=reproduction_error(rig, pp.heldout, p.pair_indices),
+                   train_error="" if train is None else reproduction_error(rig, p.examples, p.pair_indices),
+                   shape_error=float(np.median(shape_err)), seconds=secs)
+        if task.study == "noise":
+            ref = _reference_rig(task.problem, task.seed)
+            row["rig_change"] = float(np.linalg.norm(rig.deltas - ref.deltas) / np.linalg.norm(ref.deltas))
+        return row
+
+
+def study_tasks(study: str, problem: str, seeds=(0,), noise_seeds=(0, 1, 2)) -> list[Task]:
+    """The tasks of a study (alpha, lambda and the grid use constant schedules)."""
+    seeds = tuple(int(s) for s in seeds)
+    if study == "alpha":
+        return [Task("alpha", problem, s, alpha=(a, a)) for s in seeds for a in ALPHAS]
+    if study == "lambda":
+        return [Task("lambda", problem, s, lam=(v, v)) for s in seeds for v in LAMBDAS]
+    if study == "grid":
+        return [Task("grid", problem, s, alpha=(a, a), lam=(v, v)) for s in seeds for a in GRID_ALPHAS for v in GRID_LAMBDAS]
+    if study == "noise":
+        return [Task("noise", problem, s, noise=nz, noise_seed=ns) for s in seeds for nz in NOISES for ns in noise_seeds]
+    if study == "methods":
+        return [Task("methods", problem, s, method=m) for s in seeds for m in METHODS]
+    raise InputError(f"study: expected one of {STUDIES}, found {study!r}")
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover
+        return os.cpu_count() or 1
+
+
+def run_tasks(tasks, scheduler: str | None = None, workers: int | None = None, progress: bool = True) -> list[dict]:
+    """Run tasks on Dask: a local cluster of ``workers`` processes (default: one per core), or the
+    scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``) for a real cluster. Returns the rows
+    in task order. A failing task raises its own exception here, naming the task."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    tasks = list(tasks)
+    if not tasks:
+        return []
+    if scheduler:
+        client = Client(scheduler)
+        cluster = None
+    else:
+        cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1, processes=True,
+                               dashboard_address=":0")
+        client = Client(cluster)
+    try:
+        futures = client.map(run_task, tasks, pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        rows: list = [None] * len(tasks)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(tasks), desc="tasks", unit="task")
+        for fut in as_completed(futures):
+            i = index[fut.key]
+            try:
+                rows[i] = fut.result()
+            except Exception as exc:
+                raise RuntimeError(f"task {tasks[i]} failed: {exc}") from exc
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        return rows
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def table_csv(rows) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({c: r.get(c, "") for c in COLUMNS})
+    return buf.getvalue()
+
+
+def write_table(rows, path) -> None:
+    """Write the results table as CSV, atomically."""
+    from pathlib import Path
+
+    from .atomic import atomic_write_bytes
+
+    atomic_write_bytes(Path(path), table_csv(rows).encode())
+
+
+def read_table(path) -> list[dict]:
+    """Read a results table; numeric columns become floats (empty stays None)."""
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"{path}: expected a results table (CSV), found an unreadable file ({exc})") from exc
+    reader = csv.DictReader(io.StringIO(text))
+    if reader.fieldnames is None or not {"study", "method", "heldout_error"} <= set(reader.fieldnames):
+        raise InputError(f"{path}: expected a results table with columns {COLUMNS}, found {reader.fieldnames}")
+    out = []
+    for r in reader:
+        row = {}
+        for k, v in r.items():
+            if k in ("study", "problem", "method"):
+                row[k] = v
+            else:
+                row[k] = None if v == "" else float(v)
+        out.append(row)
+    return out
+
+
+__all__ = ["STUDIES", "METHODS", "COLUMNS", "Task", "run_task", "study_tasks", "run_tasks", "write_table",
+           "read_table", "person_problem"]

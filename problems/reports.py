@@ -1,0 +1,167 @@
+"""Regenerate every figure and table of ``reports/``: ``python -m problems.reports --data {default,ict}``.
+
+Runs, from scratch, into ``reports/<data>/``:
+
+* the studies (alpha, lambda, alpha x lambda, initial-weight noise, method comparison) on Dask
+  -> ``results.csv`` and its figures/tables (:func:`facebasis.report.sweep_report`);
+* one example-based run written like ``facebasis rig`` -> ``run/`` and its report (convergence,
+  weights, residuals, shapes) and ``run/rig.glb``;
+* the weight-step formulation comparison on the suite of :mod:`problems.weights_suite`
+  -> ``formulations.*``;
+* the penetration close-ups (plain transfer vs virtual edges) and their counts -> ``penetration.*``.
+
+``default`` needs nothing; ``ict`` reads ``../shared/data/ict/ict_face.npz``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _run_folder(pp, out: Path) -> Path:
+    """An example-based run written as `facebasis rig` writes it (rig, weights, history, residuals)."""
+    from facebasis.atomic import atomic_write_json
+    from facebasis.examples import weights_to_json
+    from facebasis.export import write_glb
+    from facebasis.generation import GenerationOptions, generate_blendshapes
+    from facebasis.meshio import write_mesh
+    from facebasis.results import history_to_json
+    from facebasis.rig import write_shapes
+    from facebasis.verify import write_inputs
+
+    p = pp.problem
+    options = GenerationOptions()
+    res = generate_blendshapes(p, options)
+    run = out / "run"
+    if run.exists():
+        shutil.rmtree(run)
+    write_shapes(run, res.rig)
+    atomic_write_json(run / "weights.json", weights_to_json(res.weights, p.example_names, p.template.names))
+    atomic_write_json(run / "history.json", history_to_json(res, options, p))
+    atomic_write_json(run / "residuals.json", {"threshold": options.missing_threshold,
+                                               "relative_residual": dict(zip(p.example_names, map(float, res.residuals))),
+                                               "missing": list(res.missing)})
+    inputs = out / "run_inputs"
+    for name, T in zip(p.example_names, p.examples):
+        write_mesh(inputs / "examples" / f"{name}.obj", T, p.template.faces)
+    atomic_write_json(inputs / "weights.json", weights_to_json(p.initial_weights, p.example_names, p.template.names))
+    write_inputs(run, inputs / "examples", inputs / "weights.json", p.exclusive, options.schedule()[-1][1],
+                 relative_to=run)
+    write_glb(res.rig, run / "rig.glb")
+    return run
+
+
+def _crop(V, mask, view="front", pad=0.25):
+    from facebasis.render import project
+
+    P = project(V[mask], view)
+    lo, hi = P[:, :2].min(0), P[:, :2].max(0)
+    m = pad * float((hi - lo).max())
+    return (view, ((lo[0] - m, hi[0] + m), (lo[1] - m, hi[1] + m)))
+
+
+def _penetration(data: str, out: Path) -> list[Path]:
+    """Plain transfer vs virtual edges on a target with thinner / reshaped layers; counts per
+    expression (table) and close-ups (figure)."""
+    from facebasis.penetration import intersecting_pairs
+    from facebasis.report import penetration_figure, write_table
+    from facebasis.transfer import DeformationTransfer
+    from facebasis.virtual_edges import detect_virtual_edges
+
+    if data == "ict":
+        from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
+
+        template = ict_rig()
+        c, _ = ict_random_identity(0)
+        target = ict_identity(3.0 * c)
+        zones = ict_zones()
+        show = ("mouthClose", "jawForward", "mouthShrugLower", "eyeBlink_L")
+        label = "ICT onto identity seed 0 scaled 3x"
+    else:
+        from facebasis.default_face import default_person, default_template, region_masks
+
+        template = default_template()
+        target = default_person().neutral
+        masks = region_masks()
+        zones = {"lips": masks["lips"] | masks["mouth_socket"], "lids": masks["eyelids"]}
+        show = ("mouthPucker", "jawOpen", "eyeBlink_L")
+        label = "built-in template onto the built-in person"
+    F = template.faces
+    ve = detect_virtual_edges(template.neutral, F)
+    plain = DeformationTransfer(template, target).transfer()
+    guarded = DeformationTransfer(template, target, virtual_edges=ve).transfer()
+    neutral_pairs = set(map(tuple, intersecting_pairs(target, F).tolist()))
+    rows, arrays = [], {"faces": F}
+    for i, name in enumerate(template.names):
+        tpl = set(map(tuple, intersecting_pairs(template.neutral + template.deltas[i], F).tolist()))
+        counts = []
+        for kind, rig in (("plain", plain), ("ve", guarded)):
+            X = target + rig.deltas[i]
+            P = np.array(sorted(set(map(tuple, intersecting_pairs(X, F).tolist())) - neutral_pairs - tpl),
+                         dtype=np.int64).reshape(-1, 2)
+            counts.append(len(P))
+            if name in show:
+                arrays[f"{name}/{kind}"] = X
+                arrays[f"{name}/{kind}_hits"] = np.unique(P.ravel())
+        rows.append((name, counts[0], counts[1]))
+    total = (sum(r[1] for r in rows), sum(r[2] for r in rows))
+    rows.append(("total", total[0], total[1]))
+    paths = write_table(out, "penetration", ("expression", "new pairs, plain transfer", "new pairs, virtual edges"), rows)
+    arrays["names"] = [n for n in show if f"{n}/plain" in arrays]
+    arrays["crops"] = {"lips": _crop(template.neutral, zones["lips"]), "lids": _crop(template.neutral, zones["lids"])}
+    paths += penetration_figure(arrays, out)
+    print(f"  penetration ({label}): {total[0]} new intersecting pairs with plain transfer, {total[1]} with "
+          f"virtual edges ({len(ve)} edges)")
+    return paths
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m problems.reports", description=__doc__.splitlines()[0])
+    parser.add_argument("--data", choices=("default", "ict"), default="default")
+    parser.add_argument("--out", default=None, help="output folder (default reports/<data>)")
+    parser.add_argument("--seeds", default="0", help="problem seeds of the studies (default 0)")
+    parser.add_argument("--workers", type=int, default=None)
+    parser.add_argument("--scheduler", default=None)
+    args = parser.parse_args(argv)
+    if args.data == "ict":
+        from problems.ict import ict_available, ict_path
+
+        if not ict_available():
+            print(f"ICT data not found at {ict_path()}", file=sys.stderr)
+            return 2
+    out = Path(args.out) if args.out else REPO / "reports" / args.data
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    from facebasis.report import formulation_report, report_run, sweep_report
+    from facebasis.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
+
+    seeds = tuple(int(s) for s in args.seeds.split(","))
+    tasks = [t for st in STUDIES for t in study_tasks(st, args.data, seeds)]
+    print(f"studies: {len(tasks)} tasks on {args.scheduler or 'a local Dask cluster'}")
+    rows = run_tasks(tasks, scheduler=args.scheduler, workers=args.workers)
+    write_table(rows, out / "results.csv")
+    sweep_report(read_table(out / "results.csv"), out)
+    print("run: example-based generation, default options")
+    run = _run_folder(person_problem(args.data, seeds[0]), out)
+    report_run(run, out / "run_report")
+    print("formulations: weight-step suite")
+    from facebasis.formulations import compare_formulations
+    from problems.weights_suite import weight_suite
+
+    formulation_report(compare_formulations(weight_suite(args.data)), out)
+    print("penetration")
+    _penetration(args.data, out)
+    print(f"reports/{args.data} regenerated in {time.perf_counter() - t0:.0f} s -> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -197,6 +197,28 @@ class _Instance:
     def __init__(self, H, g, offset, P, mu=0.0):
         self.H, self.g, self.offset, self.k, self.P, self.mu = H, g, offset, len(g), P, mu
         self.count = 0
+        if len(P):
+            import daqp
+
+            k = self.k
+            A = np.zeros((len(P), k))
+            A[np.arange(len(P)), P[:, 0]] = 1.0
+            A[np.arange(len(P)), P[:, 1]] = 1.0
+            Hr = H.copy()
+            if mu > 0:
+                used = np.zeros(k, bool)
+                for a, b in P:
+                    if not (used[a] or used[b]):
+                        used[a] = used[b] = True
+                        Hr[a, b] += mu
+                        Hr[b, a] += mu
+            self._Hr = Hr
+            self._upper = np.ones(k + len(P))
+            lower = np.concatenate([np.zeros(k), np.full(len(P), -1e30)])
+            self._model = daqp.Model()
+            self._model.setup(np.ascontiguousarray(Hr), np.ascontiguousarray(g, dtype=np.float64), A, self._upper,
+                              lower, np.zeros(k + len(P), dtype=np.int32))
+            self._model.settings = {"primal_tol": 1e-12, "dual_tol": 1e-12}
 
     def qp(self, zero: np.ndarray):
         free = ~zero
@@ -206,46 +228,37 @@ class _Instance:
         x[free] = sol.x
         return x, sol.value + self.offset, sol.kkt_residual
 
-    def relaxation(self, zero: np.ndarray):
-        import daqp
+    def relaxation(self, zero: np.ndarray, warm=None):
+        """Bound of a node; returns (x, value, active-set flags for warm-starting its children).
 
-        P = self.P
-        open_ = ~(zero[P[:, 0]] | zero[P[:, 1]]) if len(P) else np.zeros(0, bool)
-        if not open_.any():
+        One DAQP workspace serves every node: the cost ``H + mu S`` is the same everywhere (S adds
+        ``x_a x_b`` for disjoint pairs; it vanishes on every node's feasible set, decided pairs
+        included, and keeps the QP convex since ``H - mu I`` is PSD), the rows ``x_a + x_b <= 1``
+        are fixed, and a node only changes bounds (fixed weights become equalities 0 <= x <= 0)
+        and starts from its parent's active set.
+        """
+        P, k = self.P, self.k
+        if len(P) == 0 or (zero[P[:, 0]] | zero[P[:, 1]]).all():
             x, f, _ = self.qp(zero)
-            return x, f
+            return x, f, None
         self.count += 1
-        free = np.flatnonzero(~zero)
-        pos = -np.ones(self.k, dtype=np.int64)
-        pos[free] = np.arange(len(free))
-        Po = P[open_]
-        A = np.zeros((len(Po), len(free)))
-        rows = np.arange(len(Po))
-        A[rows, pos[Po[:, 0]]] = 1.0
-        A[rows, pos[Po[:, 1]]] = 1.0
-        n = len(free)
-        Hr = self.H[np.ix_(free, free)].copy()
-        mu = self.mu
-        if mu > 0:
-            # + mu x_a x_b for disjoint open pairs: zero wherever the pairs hold, and convex since
-            # H - mu I is PSD; it lifts mu/2 (x_a^2 + x_b^2) to its envelope mu/2 (x_a + x_b)^2
-            used = np.zeros(self.k, bool)
-            for a, b in Po:
-                if not (used[a] or used[b]):
-                    used[a] = used[b] = True
-                    Hr[pos[a], pos[b]] += mu
-                    Hr[pos[b], pos[a]] += mu
-        upper = np.ones(n + len(Po))
-        lower = np.concatenate([np.zeros(n), np.full(len(Po), -np.inf)])
-        xf, _, flag, _ = daqp.solve(Hr, np.ascontiguousarray(self.g[free]),
-                                    A, upper, lower, np.zeros(n + len(Po), dtype=np.int32),
-                                    primal_tol=1e-12, dual_tol=1e-12, eps_prox=-1.0)
+        upper = self._upper.copy()
+        upper[:k][zero] = 0.0
+        sense = np.zeros(k + len(P), dtype=np.int32) if warm is None else warm.copy()
+        sense[:k][zero] = 5                        # equality (active, immutable)
+        self._model.update(bupper=upper, sense=sense)
+        x, _, flag, _ = self._model.solve()
         if flag not in _DAQP_OK:
             raise SolverError(f"certified weights: DAQP failed on a relaxation with exit flag {flag}", str(flag))
-        x = np.zeros(self.k)
-        x[free] = np.clip(xf, 0.0, 1.0)
-        val = float(0.5 * xf @ Hr @ xf + self.g[free] @ xf) + self.offset
-        return x, val
+        x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
+        x[zero] = 0.0
+        val = float(0.5 * x @ self._Hr @ x + self.g @ x) + self.offset
+        # active set of this node: weights at 0 (lower, flag 3) or 1 (upper, 1), hull rows at 1
+        flags = np.zeros(k + len(P), dtype=np.int32)
+        flags[:k][x <= 1e-12] = 3
+        flags[:k][x >= 1.0 - 1e-12] = 1
+        flags[k:][x[P[:, 0]] + x[P[:, 1]] >= 1.0 - 1e-12] = 1
+        return x, val, flags
 
 
 #: a pair counts as satisfied in a relaxed solution if its smaller weight is at most this
@@ -306,13 +319,13 @@ def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start
         round_and_consider(np.clip(np.asarray(start, np.float64).reshape(-1), 0.0, 1.0), np.zeros(k, bool))
     tick = itertools.count()
     root = np.zeros(k, bool)
-    x, f = inst.relaxation(root)
+    x, f, flags = inst.relaxation(root)
     round_and_consider(x, root)
-    heap = [(f, next(tick), root, x)]
+    heap = [(f, next(tick), root, x, flags)]
     closed_bound = np.inf  # smallest bound among pruned nodes
     pruned = 0
     while heap:
-        f, _, zero, x = heapq.heappop(heap)
+        f, _, zero, x, flags = heapq.heappop(heap)
         if f >= threshold():
             # best-first: every node still open is bounded below by f, so the tree closes here
             closed_bound = min(closed_bound, f)
@@ -330,9 +343,9 @@ def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start
         for i in (a, b):  # branch: x_a = 0 | x_b = 0
             child = zero.copy()
             child[i] = True
-            xc, fc = inst.relaxation(child)
+            xc, fc, fl = inst.relaxation(child, flags)
             if fc < threshold():
-                heapq.heappush(heap, (fc, next(tick), child, xc))
+                heapq.heappush(heap, (fc, next(tick), child, xc, fl))
             else:
                 pruned += 1
                 closed_bound = min(closed_bound, fc)

@@ -27,7 +27,9 @@ def save(fig, path: Path, formats=("png",)) -> list[Path]:
     paths = []
     for fmt in formats:
         buf = io.BytesIO()
-        fig.savefig(buf, format=fmt, dpi=150, bbox_inches="tight")
+        # no creation date in PDF/SVG metadata: the same result gives the same file
+        meta = {"CreationDate": None} if fmt == "pdf" else ({"Date": None} if fmt == "svg" else None)
+        fig.savefig(buf, format=fmt, dpi=150, bbox_inches="tight", metadata=meta)
         p = Path(path).with_suffix("." + fmt)
         atomic_write_bytes(p, buf.getvalue())
         paths.append(p)

@@ -5,7 +5,8 @@ Runs, from scratch, into ``reports/<data>/``:
 * the studies (alpha, lambda, alpha x lambda, initial-weight noise, method comparison) on Dask
   -> ``results.csv`` and its figures/tables (:func:`facebasis.report.sweep_report`);
 * one example-based run written like ``facebasis rig`` -> ``run/`` and its report (convergence,
-  weights, residuals, shapes) and ``run/rig.glb``;
+  weights, residuals, shapes) and ``run/rig.glb``; per-vertex error maps against the person's true
+  shapes from three views (``error_maps_*``);
 * the weight-step formulation comparison on the suite of :mod:`problems.weights_suite`
   -> ``formulations.*``;
 * the penetration close-ups (plain transfer vs virtual edges) and their counts -> ``penetration.*``.
@@ -56,7 +57,23 @@ def _run_folder(pp, out: Path) -> Path:
     write_inputs(run, inputs / "examples", inputs / "weights.json", p.exclusive, options.schedule()[-1][1],
                  relative_to=run)
     write_glb(res.rig, run / "rig.glb")
-    return run
+    return run, res.rig
+
+
+def _error_maps(pp, generated, out: Path, data: str) -> list[Path]:
+    """Per-vertex error against the person's true shapes, deformation transfer vs the generated rig,
+    from three views (renders of the built-in face only; ICT faces are not rendered into the repo)."""
+    from facebasis.figures import shape_error_grid
+    from facebasis.transfer import deformation_transfer
+
+    p = pp.problem
+    dt = deformation_transfer(p.template, p.target_neutral)
+    names = ["jawOpen", "mouthSmile_L", "mouthPucker", "eyeBlink_L"]
+    paths = []
+    for view in ("front", "left", "below"):
+        paths += shape_error_grid(p.template, pp.truth, {"deformation transfer": dt, "example-based": generated},
+                                  names, out / f"error_maps_{view}", view=view)
+    return paths
 
 
 def _crop(V, mask, view="front", pad=0.25):
@@ -150,8 +167,10 @@ def main(argv=None) -> int:
     write_table(rows, out / "results.csv")
     sweep_report(read_table(out / "results.csv"), out)
     print("run: example-based generation, default options")
-    run = _run_folder(person_problem(args.data, seeds[0]), out)
+    pp = person_problem(args.data, seeds[0])
+    run, generated = _run_folder(pp, out)
     report_run(run, out / "run_report")
+    _error_maps(pp, generated, out, args.data)
     print("formulations: weight-step suite")
     from facebasis.formulations import compare_formulations
     from problems.weights_suite import weight_suite

@@ -35,3 +35,23 @@ def sheet():
 
 
 requires_ict = pytest.mark.skipif(not ict_available(), reason="ICT data not found at ../shared/data/ict")
+
+
+def write_rig_inputs(root, pp, n_iterations=None):
+    """Write a person problem as `facebasis rig` inputs under ``root``: ``template/`` (rig folder),
+    ``target.obj``, ``examples/<name>.obj`` and ``weights.json`` (rough weights by shape name)."""
+    import json
+
+    from facebasis.meshio import write_mesh
+    from facebasis.rig import write_rig_folder
+
+    p = pp.problem
+    write_rig_folder(root / "template", p.template)
+    write_mesh(root / "target.obj", p.target_neutral, p.template.faces)
+    (root / "examples").mkdir()
+    for name, T in zip(p.example_names, p.examples):
+        write_mesh(root / "examples" / f"{name}.obj", T, p.template.faces)
+    weights = {n: {s: float(v) for s, v in zip(p.template.names, row) if v > 0}
+               for n, row in zip(p.example_names, p.initial_weights)}
+    (root / "weights.json").write_text(json.dumps(weights))
+    return root

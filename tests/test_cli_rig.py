@@ -7,24 +7,17 @@ import pytest
 from facebasis.cli import main
 from facebasis.default_face import default_template
 from facebasis.meshio import write_mesh
-from facebasis.rig import load_rig_folder, write_rig_folder
+from facebasis.rig import load_rig_folder
 from facebasis.synthetic import default_face_problem
+
+from conftest import write_rig_inputs
 
 
 @pytest.fixture(scope="module")
 def rig_inputs(tmp_path_factory):
     root = tmp_path_factory.mktemp("rig")
     pp = default_face_problem(seed=0, n_train=6)
-    p = pp.problem
-    write_rig_folder(root / "template", p.template)
-    write_mesh(root / "target.obj", p.target_neutral, p.template.faces)
-    (root / "examples").mkdir()
-    for name, T in zip(p.example_names, p.examples):
-        write_mesh(root / "examples" / f"{name}.obj", T, p.template.faces)
-    weights = {n: {s: float(v) for s, v in zip(p.template.names, row) if v > 0}
-               for n, row in zip(p.example_names, p.initial_weights)}
-    (root / "weights.json").write_text(json.dumps(weights))
-    return root, pp
+    return write_rig_inputs(root, pp), pp
 
 
 def args(root, **over):

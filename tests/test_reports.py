@@ -1,6 +1,5 @@
 """Interchange (glTF), studies (Dask), report figures and their commands."""
 
-import json
 
 import numpy as np
 import pytest
@@ -10,6 +9,8 @@ from facebasis.default_face import default_template
 from facebasis.errors import InputError
 from facebasis.export import write_glb
 from facebasis.rig import write_rig_folder
+
+from conftest import write_rig_inputs
 
 
 def _read_glb_morphs(path):
@@ -109,25 +110,16 @@ def test_sweep_report_from_rows(tmp_path):
 
 
 def test_report_of_a_rig_run(tmp_path, capsys):
-    from facebasis.meshio import write_mesh
     from facebasis.synthetic import default_face_problem
 
-    pp = default_face_problem(seed=0, n_train=4)
-    p = pp.problem
-    write_rig_folder(tmp_path / "tpl", p.template)
-    write_mesh(tmp_path / "target.obj", p.target_neutral, p.template.faces)
-    (tmp_path / "ex").mkdir()
-    for n, T in zip(p.example_names, p.examples):
-        write_mesh(tmp_path / "ex" / f"{n}.obj", T, p.template.faces)
-    (tmp_path / "w.json").write_text(json.dumps({n: {s: float(v) for s, v in zip(p.template.names, row) if v > 0}
-                                                 for n, row in zip(p.example_names, p.initial_weights)}))
-    assert main(["rig", "--template", str(tmp_path / "tpl"), "--target", str(tmp_path / "target.obj"),
-                 "--examples", str(tmp_path / "ex"), "--weights", str(tmp_path / "w.json"), "--out",
+    write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=4))
+    assert main(["rig", "--template", str(tmp_path / "template"), "--target", str(tmp_path / "target.obj"),
+                 "--examples", str(tmp_path / "examples"), "--weights", str(tmp_path / "weights.json"), "--out",
                  str(tmp_path / "run"), "--iterations", "2"]) == 0
     assert main(["report", str(tmp_path / "run"), "--formats", "png"]) == 0
     names = {p.name for p in (tmp_path / "run" / "report").iterdir()}
     assert {"convergence.png", "weights.png", "residuals.png", "shapes.png", "index.md"} <= names
-    assert main(["report", str(tmp_path / "tpl")]) == 2
+    assert main(["report", str(tmp_path / "template")]) == 2
     assert "expected history.json" in capsys.readouterr().err
 
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import requires_ict
+from conftest import grid_sheet, requires_ict
 from facebasis.cli import main
 from facebasis.errors import InputError
 from facebasis.meshio import write_mesh
@@ -34,18 +34,6 @@ def folded_strip(gap=1.0, length=4.0, width=2.0, n_len=17, n_arc=7, n_wid=6):
     return V, np.array(F), layer
 
 
-def flat_sheet(n=12):
-    g = np.linspace(0, 3, n)
-    X, Y = np.meshgrid(g, g, indexing="ij")
-    V = np.stack([X.ravel(), Y.ravel(), np.zeros(n * n)], 1)
-    F = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            a, b, c, d = i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1
-            F += [(a, c, b), (b, c, d)]
-    return V, np.array(F)
-
-
 def press_rig(gap):
     """Template: the folded strip whose top layer is pressed 0.8 (template gap 1.0) toward the
     bottom at the open end, smoothly (still at the fold, which anchors the translation)."""
@@ -68,7 +56,7 @@ def test_detection_finds_pairs_across_the_gap_and_none_on_a_flat_sheet():
     assert np.all(np.sort(layer[ve.edges], axis=1) == [0, 2])
     assert np.all(ve.euclidean < 0.8) and np.all(ve.geodesic >= 2.0 * ve.euclidean)
     assert np.all(np.bincount(ve.edges.ravel(), minlength=len(V)) <= ve.per_vertex)
-    Vf, Ff = flat_sheet()
+    Vf, Ff = grid_sheet(12, 12, size=3.0)
     flat = detect_virtual_edges(Vf, Ff, cap=0.8, ratio=2.0)
     assert len(flat) == 0 and flat.candidates == 0
 
@@ -224,7 +212,7 @@ def test_proportional_virtual_edges_change_nothing_on_the_templates_own_neutral(
 
 def test_transfer_rejects_mismatched_virtual_edges():
     rig, target, _ = press_rig(gap=0.4)
-    Vf, Ff = flat_sheet()
+    Vf, Ff = grid_sheet(12, 12, size=3.0)
     other = VirtualEdges(np.array([[0, 1]]), np.ones(1), np.ones(1), len(Vf), 1.0, 2.0, 4, 0.0)
     with pytest.raises(InputError, match=f"expected a mesh of {rig.n_vertices} vertices, found edges for {len(Vf)}"):
         DeformationTransfer(rig, target, virtual_edges=other)

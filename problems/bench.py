@@ -71,7 +71,7 @@ def bench_rig(repeat: int) -> dict:
 
     pp = ict_person_problem(seed=0)
     p = pp.problem
-    res, cold, times, peak = _timed(lambda: generate_blendshapes(p), max(1, repeat // 2))
+    res, cold, times, peak = _timed(lambda: generate_blendshapes(p), max(1, repeat))
     k = p.template.n_shapes
     print(f"rig: ICT {p.template.n_vertices} vertices, {k} shapes, {len(p.examples)} training expressions, "
           f"{len(p.exclusive)} exclusive pairs, default schedule ({len(res.history)} iterations)")

@@ -133,3 +133,30 @@ def test_formulation_report(tmp_path):
     md = (tmp_path / "formulations.md").read_text()
     assert md.splitlines()[2].startswith("| certified | 6 | 6 |")
     assert (tmp_path / "formulations.png") in paths
+
+
+def test_run_tasks_on_an_existing_scheduler():
+    """`--scheduler ADDR`: the tasks go to a running Dask scheduler (here a local one started by the
+    test) and come back in task order, equal to a direct run."""
+    from dask.distributed import LocalCluster
+
+    from facebasis.studies import Task, run_task, run_tasks
+
+    tasks = [Task("methods", "default", 0, method=m) for m in ("template deltas", "vertex PCA")]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        rows = run_tasks(tasks, scheduler=cluster.scheduler_address, progress=False)
+    direct = [run_task(t) for t in tasks]
+    assert [r["method"] for r in rows] == ["template deltas", "vertex PCA"]
+    assert [r["heldout_error"] for r in rows] == [r["heldout_error"] for r in direct]
+
+
+def test_generation_problem_rejects_mismatched_virtual_edges():
+    import dataclasses
+
+    from facebasis.synthetic import default_face_problem
+    from facebasis.virtual_edges import VirtualEdges
+
+    p = default_face_problem(seed=0, n_train=3).problem
+    other = VirtualEdges(np.array([[0, 1]]), np.ones(1), np.ones(1), 10, 1.0, 2.0, 4, 0.0)
+    with pytest.raises(InputError, match=f"virtual_edges: expected edges for {p.template.n_vertices} vertices, found 10"):
+        dataclasses.replace(p, virtual_edges=other)

@@ -6,6 +6,13 @@ Core pieces (pure functions over numpy arrays, stateful solvers for repeated sol
 * :mod:`facebasis.poisson` - factor-once reconstruction of vertices from edges
 * :mod:`facebasis.transfer` - deformation transfer (Sumner & Popovic 2004)
 * :mod:`facebasis.rig`, :mod:`facebasis.meshio` - rigs, rig folders, OBJ/PLY
+* :mod:`facebasis.generation`, :mod:`facebasis.weights` - example-based generation (seed 000)
+* :mod:`facebasis.certify`, :mod:`facebasis.formulations`, :mod:`facebasis.verify` - certified
+  optima of the weight step and the IPOPT formulations compared against them
+* :mod:`facebasis.virtual_edges`, :mod:`facebasis.penetration` - virtual edges (seed 004) and the
+  exact count of intersecting triangle pairs
+* :mod:`facebasis.studies`, :mod:`facebasis.report`, :mod:`facebasis.export` - Dask studies,
+  paper-style figures from stored results, glTF export
 * :mod:`facebasis.default_face` - the generated built-in face
 """
 

@@ -13,12 +13,12 @@ of the target and rough weights ``x~``, alternate
   with ``A~_i`` the deformation transfer of template shape i and per-triangle weights
   ``w_i = ((1 + s_i) / (mu + s_i))^sigma`` (mu = 0.1, sigma = 2); then reconstruct vertex deltas
   from the edges with the factor-once :class:`~facebasis.poisson.EdgePoisson`;
-* the **weight step** (eq. 5): :class:`~facebasis.weights.WeightSolver` (CasADi + IPOPT, exact
-  polish).
+* the **weight step** (eq. 5): :class:`~facebasis.weights.WeightSolver` (CasADi + IPOPT, then the
+  certified global optimum of every example by branch and bound, :mod:`facebasis.certify`).
 
 Per triangle the basis step is the k x k system ``(X X^T + alpha W) Y = X R + alpha W A~``; with
-m < k it is solved through the m x m Woodbury form, batched over all triangles with BLAS matrix
-products (no Python loop over triangles).
+m < k it is solved through the m x m Woodbury form, in blocks of triangles with BLAS matrix
+products, the blocks on worker threads (no Python loop over triangles).
 
 Units of ``w_i``: the paper's ``s_i = ||A_i^S||`` is a length, so ``w_i`` would change with the
 mesh's units (cm vs m). facebasis uses by default the scale-free relative edge change

@@ -101,7 +101,7 @@ class WeightSolver:
     n_examples : m
     pairs : sequence of (a, b) shape indices that are mutually exclusive
     ipopt_options : extra IPOPT options (``tol``, ``max_iter``, ...)
-    polish : polish every answer exactly on IPOPT's complementarity branch
+    polish : replace every answer by the certified global optimum of each example (branch and bound)
     """
 
     def __init__(self, n_shapes: int, n_examples: int, pairs=(), ipopt_options: dict | None = None,

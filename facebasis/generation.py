@@ -241,51 +241,72 @@ def regularisation_weights(template_frame_deltas, template_frames, mu=0.1, sigma
 BASIS_BLOCK = 512
 
 
-def _basis_block(X, XX, R, A_tilde, w, alpha, out, s):
-    """Eq. 4 on the triangles of slice ``s``; writes ``out[:, :, s]`` and returns (E_fit, E_reg) there.
+def _basis_block(X, XX, RT, AT, w, alpha, out, s):
+    """Eq. 4 on the triangles of slice ``s``; writes ``out[:, s]`` and returns (E_fit, E_reg) there.
 
-    ``XX`` is ``X X^T`` (k, k) when m >= k (direct k x k solves), else the (k, m*m) table of
-    ``x_i x_i^T`` for the Woodbury form.
+    Triangle-major layout, so that every product has the shapes (6c, .) x (., k) and the result
+    lands in the reconstruction's layout without a transpose of the whole array:
+    ``RT`` (6, m_tri, m) and ``AT`` (6, m_tri, k) hold ``R_j`` and ``A~_i`` with the 6 edge-column
+    entries (coordinate d, column e) first; ``out`` is (2, m_tri, 3, k) = [column e, triangle,
+    coordinate d, shape i]. ``XX`` is ``X X^T`` (k, k) when m >= k (direct k x k solves), else the
+    (k, m*m) table of ``x_i x_i^T`` for the Woodbury form.
     """
     k, m = X.shape
-    wt = w[s]                                   # (c, k)
+    wt = w[s]                                            # (c, k)
     c = wt.shape[0]
-    R_s = np.ascontiguousarray(R[:, :, s])      # (m, 6, c)
-    A_s = A_tilde[:, :, s]
+    Rs = np.ascontiguousarray(RT[:, s, :]).reshape(6 * c, m)
+    As = AT[:, s, :]                                     # (6, c, k)
     if m >= k:  # (X X^T + D) Y = X R + D A~ directly, per triangle
-        D = alpha * wt                          # (c, k)
+        D = alpha * wt
         A = np.broadcast_to(XX, (c, k, k)).copy()
         A.reshape(c, -1)[:, :: k + 1] += D
-        rhs = (X @ R_s.reshape(m, -1)).reshape(k, 6, c)
-        rhs += D.T[:, None, :] * A_s
-        Y = np.ascontiguousarray(np.linalg.solve(A, rhs.transpose(2, 0, 1)).transpose(1, 2, 0))
-        out[:, :, s] = Y
-        return _block_energies(X, Y, R_s, A_s, wt)
-    dinv_t = 1.0 / (alpha * wt)                 # D^-1, (c, k)
-    dinv = dinv_t.T[:, None, :]                 # (k, 1, c)
-    Gm = (X @ R_s.reshape(m, -1)).reshape(k, 6, c)  # sum_j x_ij R_j
-    Gm *= dinv
-    Gm += A_s                                   # D^-1 (X R + D A~)
-    XtG = (X.T @ Gm.reshape(k, -1)).reshape(m, 6, c)
-    # K_t = I + X^T D_t^-1 X for every triangle of the block: one (c, k) x (k, m*m) product
-    K = (dinv_t @ XX).reshape(c, m, m)
-    K.reshape(c, -1)[:, :: m + 1] += 1.0
-    Z = np.linalg.solve(K, XtG.transpose(2, 0, 1))  # (c, m, 6)
-    XZ = (X @ np.ascontiguousarray(Z.transpose(1, 2, 0)).reshape(m, -1)).reshape(k, 6, c)
-    XZ *= dinv
-    Y = np.subtract(Gm, XZ, out=Gm)
-    out[:, :, s] = Y
-    return _block_energies(X, Y, R_s, A_s, wt)
-
-
-def _block_energies(X, Y, R_s, A_s, wt):
-    """Eq. 2 and eq. 3 on one block of triangles."""
-    k, m = X.shape
-    fit = (X.T @ Y.reshape(k, -1)).reshape(R_s.shape)
-    fit -= R_s
-    diff = A_s - Y
+        rhs = (Rs @ X.T).reshape(6, c, k)
+        rhs += D[None] * As
+        Y = np.ascontiguousarray(np.linalg.solve(A, rhs.transpose(1, 2, 0)).transpose(2, 0, 1))  # (6, c, k)
+    else:
+        dinv = 1.0 / (alpha * wt)                        # D^-1, (c, k)
+        Gm = (Rs @ X.T).reshape(6, c, k)                 # sum_j x_ij R_j
+        Gm *= dinv[None]
+        Gm += As                                         # D^-1 (X R + D A~)
+        XtG = (Gm.reshape(6 * c, k) @ X).reshape(6, c, m)
+        # K_t = I + X^T D_t^-1 X for every triangle of the block: one (c, k) x (k, m*m) product
+        K = (dinv @ XX).reshape(c, m, m)
+        K.reshape(c, -1)[:, :: m + 1] += 1.0
+        Z = np.linalg.solve(K, XtG.transpose(1, 2, 0))   # (c, m, 6)
+        XZ = (np.ascontiguousarray(Z.transpose(2, 0, 1)).reshape(6 * c, m) @ X.T).reshape(6, c, k)
+        XZ *= dinv[None]
+        Y = np.subtract(Gm, XZ, out=Gm)                  # (6, c, k)
+    out[:, s] = Y.reshape(3, 2, c, k).transpose(1, 2, 0, 3)
+    # eq. 2 and eq. 3 on the block
+    fit = (Y.reshape(6 * c, k) @ X).reshape(6 * c, m)
+    fit -= Rs
+    diff = As - Y
     diff *= diff
-    return float(np.vdot(fit, fit)), float(np.einsum("tk,kct->", wt, diff))
+    return float(np.vdot(fit, fit)), float(np.einsum("ck,dck->", wt, diff))
+
+
+def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
+    """Eq. 4 for every triangle in the triangle-major layout of :func:`_basis_block`.
+
+    Returns (out (2, m_tri, 3, k), E_fit, E_reg); ``out.reshape(2 m_tri, 3k)`` is what
+    :meth:`facebasis.poisson.EdgePoisson.solve_frame_rows` takes.
+    """
+    k, m = X.shape
+    m_tri = RT.shape[1]
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    XX = X @ X.T if m >= k else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
+    out = np.empty((2, m_tri, 3, k))
+    blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]
+    if executor is None:
+        parts = [_basis_block(X, XX, RT, AT, w, alpha, out, s) for s in blocks]
+    else:
+        parts = list(executor.map(lambda s: _basis_block(X, XX, RT, AT, w, alpha, out, s), blocks))
+    return out, float(sum(p[0] for p in parts)), float(sum(p[1] for p in parts))
+
+
+def to_triangle_major(A) -> np.ndarray:
+    """(q, 6, m_tri) -> (6, m_tri, q), the layout of :func:`basis_rows`."""
+    return np.ascontiguousarray(np.asarray(A, dtype=np.float64).transpose(1, 2, 0))
 
 
 def basis_step(X, R, A_tilde, w, alpha, *, executor=None, block: int = BASIS_BLOCK, energies: bool = False):
@@ -311,23 +332,17 @@ def basis_step(X, R, A_tilde, w, alpha, *, executor=None, block: int = BASIS_BLO
     -----
     Per triangle ``(X X^T + D) Y = X R + D A~`` with ``D = alpha diag(w_t)``. With m < k the
     Woodbury identity ``(D + X X^T)^-1 = D^-1 - D^-1 X (I + X^T D^-1 X)^-1 X^T D^-1`` reduces each
-    triangle to an m x m solve; with m >= k the k x k system is solved directly. Triangles are processed in blocks (cache-sized, one BLAS product
-    per contraction, no Python loop over triangles); blocks are independent and run in parallel
-    on ``executor``.
+    triangle to an m x m solve; with m >= k the k x k system is solved directly. Triangles are
+    processed in blocks (cache-sized, one BLAS product per contraction, no Python loop over
+    triangles); blocks are independent and run in parallel on ``executor``. This wrapper converts
+    layouts; the generator calls :func:`basis_rows` on data kept in its layout.
     """
-    k, m = X.shape
+    k = X.shape[0]
     m_tri = R.shape[-1]
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    XX = X @ X.T if m >= k else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
-    out = np.empty((k, 6, m_tri))
-    blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]
-    if executor is None:
-        parts = [_basis_block(X, XX, R, A_tilde, w, alpha, out, s) for s in blocks]
-    else:
-        parts = list(executor.map(lambda s: _basis_block(X, XX, R, A_tilde, w, alpha, out, s), blocks))
-    if not energies:
-        return out
-    return out, float(sum(p[0] for p in parts)), float(sum(p[1] for p in parts))
+    out, e_fit, e_reg = basis_rows(X, to_triangle_major(R), to_triangle_major(A_tilde), w, alpha,
+                                   executor=executor, block=block)
+    Y = np.ascontiguousarray(out.transpose(3, 2, 0, 1)).reshape(k, 6, m_tri)  # [i, (d, e), t]
+    return (Y, e_fit, e_reg) if energies else Y
 
 
 def basis_energies(X, R, A_tilde, w, Y):
@@ -366,34 +381,49 @@ class BlendshapeGenerator:
         dA = frames_cm(tpl.neutral + tpl.deltas, F)
         dA -= self.dt.template_frames
         # eq. 3 prior: A~_i = Q_i A_0^B - A_0^B = (A_i^S - A_0^S) (A_0^S)^-1 A_0^B
-        self.A_tilde = self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6, m_tri)
+        self.A_tilde = to_triangle_major(self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6,
+                                                                                                  m_tri))  # (6, m_tri, k)
         self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
                                                              opts.sigma, opts.weight_measure))  # (m_tri, k)
         del dA
         B0 = problem.target_neutral
         T_frames = frames_cm(problem.examples, F)[:, :, :2] - self.dt.target_frames[:, :2]
-        self.R = np.ascontiguousarray(T_frames.reshape(len(problem.examples), 6, m_tri))
-        # t_j coordinate-major (m, 3n), matching the reconstruction's (k, 3, n) output, so the Gram
-        # matrices of the weight step need no transposed copy of the blendshapes
-        self.targets = np.ascontiguousarray(np.moveaxis(problem.examples - B0, 2, 1)).reshape(len(problem.examples), -1)
-        self.target_sq = (self.targets ** 2).sum(1)
+        self.R = to_triangle_major(T_frames.reshape(len(problem.examples), 6, m_tri))  # (6, m_tri, m)
+        # t_j per coordinate, (n, m) each: the reconstruction's output is (n, 3k) with columns
+        # (coordinate, shape), so the weight step's Gram matrices are three products of its slices
+        E = problem.examples - B0
+        self.targets = [np.ascontiguousarray(E[:, :, d].T) for d in range(3)]
+        self.target_sq = (E ** 2).sum(axis=(1, 2))
         self.pairs = problem.pair_indices
         self.weight_solver = WeightSolver(tpl.n_shapes, len(problem.examples), self.pairs,
                                           opts.ipopt_options, polish=opts.polish)
-        # anchors keep the template's delta (zero at still vertices), as deformation transfer does
-        self.anchor_values = self.dt.anchor_values()  # = deformation transfer's values there
+        # anchors keep the template's delta (zero at still vertices), as deformation transfer does;
+        # rows (a, 3k) with columns (coordinate, shape)
+        av = self.dt.anchor_values()  # (k, a, 3)
+        self.anchor_rows = np.ascontiguousarray(av.transpose(1, 2, 0)).reshape(av.shape[1], -1)
+        vc = self.virtual_cols  # (k*3, e), rows (shape, coordinate)
+        self.virtual_rows = None if vc is None else np.ascontiguousarray(
+            vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         self.precompute_seconds = time.perf_counter() - t0
 
-    def reconstruct(self, Y) -> np.ndarray:
-        """Vertex deltas (k, n, 3) from the basis step's frame deltas Y (k, 6, m_tri)."""
-        k, _, m_tri = Y.shape
-        return self.dt.solve_frame_deltas(Y.reshape(k, 3, 2, m_tri), self.anchor_values, self.virtual_cols)
+    def reconstruct(self, rows) -> np.ndarray:
+        """Vertex deltas from the basis step's frame rows (2, m_tri, 3, k): returns (n, 3k) with
+        column ``d k + i`` = coordinate d of shape i."""
+        two, m_tri, three, k = rows.shape
+        return self.dt.poisson.solve_frame_rows(rows.reshape(2 * m_tri, 3 * k), self.anchor_rows, self.virtual_rows)
 
-    def weight_step(self, deltas, lam, X0=None) -> WeightSolution:
-        """Eq. 5 with blendshape deltas (k, n, 3) from :meth:`reconstruct`."""
-        B = np.moveaxis(deltas, 2, 1).reshape(len(deltas), -1)  # (k, 3n) coordinate-major, no copy
-        G = B @ B.T
-        C = B @ self.targets.T
+    @staticmethod
+    def deltas_of(Bv) -> np.ndarray:
+        """(n, 3k) reconstruction output -> (k, n, 3) deltas."""
+        n = Bv.shape[0]
+        return np.ascontiguousarray(Bv.reshape(n, 3, -1).transpose(2, 0, 1))
+
+    def weight_step(self, Bv, lam, X0=None) -> WeightSolution:
+        """Eq. 5 with the blendshapes ``Bv`` (n, 3k) of :meth:`reconstruct`."""
+        k = self.problem.template.n_shapes
+        cols = [Bv[:, d * k:(d + 1) * k] for d in range(3)]  # (n, k) strided views, no copy
+        G = sum(B.T @ B for B in cols)
+        C = sum(B.T @ T for B, T in zip(cols, self.targets))
         return self.weight_solver.solve(G, C, self.target_sq, self.problem.initial_weights, lam, X0)
 
     def run(self, progress=None) -> GenerationResult:
@@ -421,10 +451,10 @@ class BlendshapeGenerator:
             t0 = time.perf_counter()
             # parallel over blocks of triangles, not inside BLAS
             with threadpool_limits(1) if pool is not None else nullcontext():
-                Y, e_fit, e_reg = basis_step(X.T, self.R, self.A_tilde, self.w, alpha, executor=pool, energies=True)
-            deltas = self.reconstruct(Y)
+                rows, e_fit, e_reg = basis_rows(X.T, self.R, self.A_tilde, self.w, alpha, executor=pool)
+            Bv = self.reconstruct(rows)
             t1 = time.perf_counter()
-            sol = self.weight_step(deltas, lam, X0=X)
+            sol = self.weight_step(Bv, lam, X0=X)
             X = sol.weights
             history.append(IterationRecord(
                 iteration=it + 1, alpha=alpha, lam=lam, e_fit=e_fit, e_reg=e_reg,
@@ -437,7 +467,7 @@ class BlendshapeGenerator:
             ))
             if progress is not None:
                 progress(history[-1], len(schedule))
-        return history, X, np.ascontiguousarray(deltas)
+        return history, X, self.deltas_of(Bv)
 
 
 def _available_cores() -> int:
@@ -482,5 +512,5 @@ def reproduction_error(rig: Rig, expressions: np.ndarray, pairs=(), solver: Weig
 
 
 __all__ = ["GenerationProblem", "GenerationOptions", "GenerationResult", "IterationRecord", "BlendshapeGenerator",
-           "generate_blendshapes", "basis_step", "basis_energies", "regularisation_weights", "relative_residuals",
+           "generate_blendshapes", "basis_step", "basis_rows", "basis_energies", "regularisation_weights", "relative_residuals",
            "refit_weights", "reproduction_error", "eq5_objective"]

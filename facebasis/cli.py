@@ -80,12 +80,11 @@ def _pair_of_floats(text: str, name: str) -> tuple[float, float]:
 
 
 def cmd_rig(args) -> int:
-    from .atomic import atomic_directory, atomic_write_json
-    from .examples import load_examples, load_weights, parse_pairs, weights_to_json
+    from .atomic import atomic_directory
+    from .examples import load_examples, load_weights, parse_pairs
     from .generation import GenerationOptions, GenerationProblem, BlendshapeGenerator
-    from .rig import load_rig_folder, load_target_neutral, write_shapes
-    from .results import history_to_json
-    from .verify import write_inputs
+    from .results import write_rig_run
+    from .rig import load_rig_folder, load_target_neutral
 
     # everything is validated before any solving starts
     options = GenerationOptions(iterations=args.iterations, alpha=_pair_of_floats(args.alpha, "--alpha"),
@@ -109,14 +108,7 @@ def cmd_rig(args) -> int:
 
     result = gen.run(progress)
     with atomic_directory(args.out) as stage:
-        write_shapes(stage, result.rig)
-        atomic_write_json(stage / "weights.json", weights_to_json(result.weights, names, template.names))
-        atomic_write_json(stage / "history.json", history_to_json(result, options, problem))
-        atomic_write_json(stage / "residuals.json", {
-            "threshold": options.missing_threshold,
-            "relative_residual": dict(zip(names, map(float, result.residuals))),
-            "missing": list(result.missing)})
-        write_inputs(stage, args.examples, args.weights, problem.exclusive, options.schedule()[-1][1])
+        write_rig_run(stage, result, options, problem, args.examples, args.weights)
     failed = [h for h in result.history if not h.ipopt_success]
     for h in failed:
         print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was replaced "

@@ -54,10 +54,8 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         # example-based generation from training expressions of the person
         from .synthetic import default_face_problem
 
-        from .examples import weights_to_json
         from .generation import GenerationOptions, generate_blendshapes, reproduction_error
-        from .results import history_to_json
-        from .verify import write_inputs
+        from .results import history_to_json, write_problem_inputs, write_rig_run
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
         options = GenerationOptions(iterations=3 if quick else 10)
@@ -67,22 +65,10 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
                 f"weight objective {rec.weight_objective:.6g} IPOPT {rec.ipopt_status}")
 
         result = generate_blendshapes(pp.problem, options, progress)
-        write_shapes(stage / "rig", result.rig)
-        from .export import write_glb
-
-        write_glb(result.rig, stage / "rig" / "rig.glb")  # glTF 2.0, one morph target per shape
-        # the run's inputs as files, so `facebasis verify OUT/rig` can re-solve its weight step
-        inputs = stage / "rig_inputs"
-        for name, T in zip(pp.problem.example_names, pp.problem.examples):
-            write_mesh(inputs / "examples" / f"{name}.obj", T, template.faces)
-        atomic_write_json(inputs / "weights.json",
-                          weights_to_json(pp.problem.initial_weights, pp.problem.example_names, template.names))
-        write_inputs(stage / "rig", inputs / "examples", inputs / "weights.json", pp.problem.exclusive,
-                     options.schedule()[-1][1], relative_to=stage / "rig")
-        atomic_write_json(stage / "rig" / "weights.json",
-                          weights_to_json(result.weights, pp.problem.example_names, template.names))
+        # the run as `facebasis rig` writes it, with its inputs as files (`facebasis verify OUT/rig`)
+        examples_dir, weights_file = write_problem_inputs(stage / "rig_inputs", pp.problem)
+        write_rig_run(stage / "rig", result, options, pp.problem, examples_dir, weights_file, relative_to=stage / "rig")
         history = history_to_json(result, options, pp.problem)
-        atomic_write_json(stage / "rig" / "history.json", history)
         gen_err = _relative_errors(result.rig.deltas, person.deltas)
         heldout = {label: reproduction_error(rig, pp.heldout, pp.problem.pair_indices)
                    for label, rig in (("example-based", result.rig), ("deformation transfer", transferred))}

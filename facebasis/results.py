@@ -18,3 +18,45 @@ def history_to_json(result, options, problem) -> dict:
         "all_ipopt_succeeded": result.all_ipopt_succeeded,
         "iterations": [dataclasses.asdict(h) for h in result.history],
     }
+
+
+def write_rig_run(folder, result, options, problem, examples_dir, weights_file, relative_to=None) -> None:
+    """Write a generation run as `facebasis rig` writes it, into an existing (staging) folder:
+    ``<shape>.obj`` + ``neutral.obj``, ``weights.json``, ``history.json``, ``residuals.json``,
+    ``inputs.json`` (for `facebasis verify`) and ``rig.glb``."""
+    from pathlib import Path
+
+    from .atomic import atomic_write_json
+    from .examples import weights_to_json
+    from .export import write_glb
+    from .rig import write_shapes
+    from .verify import write_inputs
+
+    folder = Path(folder)
+    write_shapes(folder, result.rig)
+    names = problem.example_names
+    atomic_write_json(folder / "weights.json", weights_to_json(result.weights, names, problem.template.names))
+    atomic_write_json(folder / "history.json", history_to_json(result, options, problem))
+    atomic_write_json(folder / "residuals.json", {
+        "threshold": options.missing_threshold,
+        "relative_residual": dict(zip(names, map(float, result.residuals))),
+        "missing": list(result.missing)})
+    write_inputs(folder, examples_dir, weights_file, problem.exclusive, options.schedule()[-1][1], relative_to)
+    write_glb(result.rig, folder / "rig.glb")
+
+
+def write_problem_inputs(folder, problem):
+    """A generation problem's training expressions (``examples/<name>.obj``) and rough weights
+    (``weights.json``) as files; returns (examples_dir, weights_file)."""
+    from pathlib import Path
+
+    from .atomic import atomic_write_json
+    from .examples import weights_to_json
+    from .meshio import write_mesh
+
+    folder = Path(folder)
+    for name, T in zip(problem.example_names, problem.examples):
+        write_mesh(folder / "examples" / f"{name}.obj", T, problem.template.faces)
+    atomic_write_json(folder / "weights.json",
+                      weights_to_json(problem.initial_weights, problem.example_names, problem.template.names))
+    return folder / "examples", folder / "weights.json"

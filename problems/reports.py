@@ -27,16 +27,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 
 
-def _run_folder(pp, out: Path) -> Path:
-    """An example-based run written as `facebasis rig` writes it (rig, weights, history, residuals)."""
-    from facebasis.atomic import atomic_write_json
-    from facebasis.examples import weights_to_json
-    from facebasis.export import write_glb
+def _run_folder(pp, out: Path):
+    """An example-based run written as `facebasis rig` writes it, with its inputs as files."""
     from facebasis.generation import GenerationOptions, generate_blendshapes
-    from facebasis.meshio import write_mesh
-    from facebasis.results import history_to_json
-    from facebasis.rig import write_shapes
-    from facebasis.verify import write_inputs
+    from facebasis.results import write_problem_inputs, write_rig_run
 
     p = pp.problem
     options = GenerationOptions()
@@ -44,19 +38,8 @@ def _run_folder(pp, out: Path) -> Path:
     run = out / "run"
     if run.exists():
         shutil.rmtree(run)
-    write_shapes(run, res.rig)
-    atomic_write_json(run / "weights.json", weights_to_json(res.weights, p.example_names, p.template.names))
-    atomic_write_json(run / "history.json", history_to_json(res, options, p))
-    atomic_write_json(run / "residuals.json", {"threshold": options.missing_threshold,
-                                               "relative_residual": dict(zip(p.example_names, map(float, res.residuals))),
-                                               "missing": list(res.missing)})
-    inputs = out / "run_inputs"
-    for name, T in zip(p.example_names, p.examples):
-        write_mesh(inputs / "examples" / f"{name}.obj", T, p.template.faces)
-    atomic_write_json(inputs / "weights.json", weights_to_json(p.initial_weights, p.example_names, p.template.names))
-    write_inputs(run, inputs / "examples", inputs / "weights.json", p.exclusive, options.schedule()[-1][1],
-                 relative_to=run)
-    write_glb(res.rig, run / "rig.glb")
+    examples_dir, weights_file = write_problem_inputs(out / "run_inputs", p)
+    write_rig_run(run, res, options, p, examples_dir, weights_file, relative_to=run)
     return run, res.rig
 
 

@@ -85,3 +85,7 @@ def test_demo_quick(tmp_path):
     assert summary["template_vertices"] == default_template().n_vertices
     assert (out / "figures" / "error_maps.png").stat().st_size > 10000
     assert len(list((out / "transfer").glob("*.obj"))) == 16
+    # the demo's rig is a complete `facebasis rig` folder: it verifies, reports and exports
+    assert main(["verify", str(out / "rig")]) == 0
+    assert main(["report", str(out / "rig"), "--formats", "png"]) == 0
+    assert (out / "rig" / "report" / "convergence.png").is_file() and (out / "rig" / "rig.glb").is_file()

@@ -77,16 +77,22 @@ def edge_columns_to_rows(Y: np.ndarray) -> np.ndarray:
     """Frame edge columns (k, 3, 2, m) -> triangle-edge targets (k*3, 3m) for ``EdgePoisson``.
 
     Row ``3 i + x`` holds coordinate x of shape i; column ``3 t + e`` is edge e of triangle t in
-    the order of :data:`EDGE_CORNERS`: ``a``, ``b - a``, ``-b`` for columns ``a = v2 - v1``,
-    ``b = v3 - v1``.
+    the order of :data:`EDGE_CORNERS` (:data:`FRAME_TO_EDGES`: ``a``, ``b - a``, ``-b`` for
+    columns ``a = v2 - v1``, ``b = v3 - v1``).
     """
     k, _, _, m = Y.shape
-    out = np.empty((k, 3, m, 3))
-    a, b = Y[:, :, 0, :], Y[:, :, 1, :]
-    out[..., 0] = a
-    np.subtract(b, a, out=out[..., 1])
-    np.negative(b, out=out[..., 2])
-    return out.reshape(k * 3, 3 * m)
+    return np.asarray(Y.reshape(k * 3, 2 * m) @ frame_edge_operator(m).T)
+
+
+def frame_edge_operator(m: int) -> sp.csr_matrix:
+    """Sparse (3m, 2m) form of :data:`FRAME_TO_EDGES` for m triangles: maps the frame columns
+    ``[a_1..a_m, b_1..b_m]`` to the edges ``3 t + e`` of :data:`EDGE_CORNERS`."""
+    t = np.arange(m)
+    e, c = np.nonzero(FRAME_TO_EDGES)
+    rows = (3 * t[None, :] + e[:, None]).ravel()
+    cols = (c[:, None] * m + t[None, :]).ravel()
+    vals = np.repeat(FRAME_TO_EDGES[e, c], m)
+    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * m, 2 * m))
 
 
 def deformation_gradients(V_rest: np.ndarray, V_def: np.ndarray, F: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .errors import InputError, MeshError
-from .gradients import edge_operator
+from .gradients import edge_operator, frame_edge_operator
 from .mesh import connected_components
 
 #: A template vertex whose largest displacement over all shapes is at most this fraction of the
@@ -195,18 +195,10 @@ class EdgePoisson:
         return self._solve_rhs(np.asarray(self._Et @ edge_cols.T), anchor_cols, extra_cols)
 
     def _frame_operator(self):
-        """``E^T C S`` (n, 2m): S maps frame edge columns ``[a_1..a_m, b_1..b_m]`` (``a = v2 - v1``,
-        ``b = v3 - v1``) to the edges of :data:`~facebasis.gradients.EDGE_CORNERS`, ``a``, ``b - a``
-        and ``-b``; built once."""
+        """``E^T C S`` (n, 2m) with S = :func:`~facebasis.gradients.frame_edge_operator`: frame edge
+        columns ``[a_1..a_m, b_1..b_m]`` straight to right-hand sides; built once."""
         if self._frame_op is None:
-            m = self.n_faces
-            t = np.arange(m)
-            # rows 3t+e of the edge vector from the a (col t) and b (col m+t) columns
-            rows = np.concatenate([3 * t, 3 * t + 1, 3 * t + 1, 3 * t + 2])
-            cols = np.concatenate([t, t, m + t, m + t])
-            vals = np.concatenate([np.ones(m), -np.ones(m), np.ones(m), -np.ones(m)])
-            S = sp.csr_matrix((vals, (rows, cols)), shape=(3 * m, 2 * m))
-            self._frame_op = (self._Ew.T @ S).tocsr()
+            self._frame_op = (self._Ew.T @ frame_edge_operator(self.n_faces)).tocsr()
         return self._frame_op
 
     def solve_frame_columns(self, frame_cols: np.ndarray, anchor_cols: np.ndarray | None = None,

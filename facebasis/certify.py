@@ -148,18 +148,14 @@ class CertifiedSolution:
         return self.gap <= self.gap_tol * (1.0 + abs(self.objective))
 
 
-def _check_instance(G, c, const, prior, lam, pairs):
+def _check_shared(G, lam, pairs):
+    """Validate what all examples of one weight step share; returns (H = 2 (G + lam I), P, l_min(H))."""
     G = np.asarray(G, np.float64)
     if G.ndim != 2 or G.shape[0] != G.shape[1]:
         raise InputError(f"Gram matrix G: expected a square (k, k) matrix, found shape {G.shape}")
     k = G.shape[0]
-    c = np.asarray(c, np.float64).reshape(-1)
-    prior = np.zeros(k) if prior is None else np.asarray(prior, np.float64).reshape(-1)
-    if c.shape != (k,) or prior.shape != (k,):
-        raise InputError(f"weight problem: expected c and prior of length {k}, found {c.shape}, {prior.shape}")
-    for name, a in (("G", G), ("c", c), ("prior", prior)):
-        if not np.isfinite(a).all():
-            raise InputError(f"weight problem: expected finite {name}, found NaN/inf")
+    if not np.isfinite(G).all():
+        raise InputError("weight problem: expected finite G, found NaN/inf")
     if not np.isfinite(lam) or lam < 0:
         raise InputError(f"lambda: expected a finite value >= 0, found {lam}")
     if not np.allclose(G, G.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(G).max())):
@@ -174,7 +170,19 @@ def _check_instance(G, c, const, prior, lam, pairs):
         raise InputError(f"exclusive pairs: expected shape indices in [0, {k}), found {P.tolist()}")
     if len(P) and np.any(P[:, 0] == P[:, 1]):
         raise InputError(f"exclusive pairs: a pair names one shape twice: {P[P[:, 0] == P[:, 1]].tolist()}")
-    return G, c, float(const), prior, float(lam), P, H, float(ev[0])
+    return H, P, float(ev[0])
+
+
+def _check_example(k, c, prior):
+    """Validate one example's data; returns (c, prior) as float arrays (k,)."""
+    c = np.asarray(c, np.float64).reshape(-1)
+    prior = np.zeros(k) if prior is None else np.asarray(prior, np.float64).reshape(-1)
+    if c.shape != (k,) or prior.shape != (k,):
+        raise InputError(f"weight problem: expected c and prior of length {k}, found {c.shape}, {prior.shape}")
+    for name, a in (("c", c), ("prior", prior)):
+        if not np.isfinite(a).all():
+            raise InputError(f"weight problem: expected finite {name}, found NaN/inf")
+    return c, prior
 
 
 def _violations(x, P):
@@ -182,25 +190,27 @@ def _violations(x, P):
     return comp, float(max(0.0, -x.min(), x.max() - 1.0)) if len(x) else 0.0
 
 
-class _Instance:
-    """One example's problem.
+class _Workspace:
+    """What every example of one weight step shares: ``H = 2 (G + lam I)``, the pairs and one DAQP
+    workspace for the node relaxations. :meth:`set_example` loads an example's linear term.
 
     ``qp(zero)`` solves the box-QP with the weights ``zero`` fixed at 0 (one branch, exactly);
     ``relaxation(zero)`` adds, for every pair with neither weight fixed, ``x_a + x_b <= 1`` (the
     convex hull of ``{x_a x_b = 0, 0 <= x <= 1}`` in the pair's two weights) and the term
-    ``mu x_a x_b`` with ``mu`` = smallest eigenvalue of H (over disjoint pairs). Both vanish or hold
-    at every point that satisfies the pairs, and the QP stays convex, so its minimum is a valid
-    lower bound; the term is the perspective strengthening that makes strongly convex (e.g.
+    ``mu x_a x_b`` with ``mu`` = 0.999 x smallest eigenvalue of H (over disjoint pairs). Both vanish
+    or hold at every point that satisfies the pairs, and the QP stays convex, so its minimum is a
+    valid lower bound; the term is the perspective strengthening that makes strongly convex (e.g.
     prior-dominated) instances prune early.
     """
 
-    def __init__(self, H, g, offset, P, mu=0.0):
-        self.H, self.g, self.offset, self.k, self.P, self.mu = H, g, offset, len(g), P, mu
-        self.count = 0
+    def __init__(self, H, P, ev_min):
+        self.H, self.P, self.k = H, P, len(H)
+        self.mu = 0.999 * max(0.0, ev_min) if len(P) else 0.0
+        self.g, self.offset, self.count = np.zeros(self.k), 0.0, 0
         if len(P):
             import daqp
 
-            k = self.k
+            k, mu = self.k, self.mu
             A = np.zeros((len(P), k))
             A[np.arange(len(P)), P[:, 0]] = 1.0
             A[np.arange(len(P)), P[:, 1]] = 1.0
@@ -216,9 +226,15 @@ class _Instance:
             self._upper = np.ones(k + len(P))
             lower = np.concatenate([np.zeros(k), np.full(len(P), -1e30)])
             self._model = daqp.Model()
-            self._model.setup(np.ascontiguousarray(Hr), np.ascontiguousarray(g, dtype=np.float64), A, self._upper,
+            self._model.setup(np.ascontiguousarray(Hr), np.zeros(k), A, self._upper,
                               lower, np.zeros(k + len(P), dtype=np.int32))
             self._model.settings = {"primal_tol": 1e-12, "dual_tol": 1e-12}
+
+    def set_example(self, g, offset):
+        """Linear term ``g`` (k,) and constant of one example; resets the node count."""
+        self.g, self.offset, self.count = np.ascontiguousarray(g, dtype=np.float64), float(offset), 0
+        if len(self.P):
+            self._model.update(f=self.g)
 
     def qp(self, zero: np.ndarray):
         free = ~zero
@@ -294,69 +310,87 @@ def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start
     SolverError
         the tree exceeded ``max_nodes`` or DAQP failed
     """
-    t0 = time.perf_counter()
-    G, c, const, prior, lam, P, H, ev_min = _check_instance(G, c, const, prior, lam, pairs)
-    g = -2.0 * (c + lam * prior)
-    mu = 0.999 * max(0.0, ev_min) if len(P) else 0.0
-    inst = _Instance(H, g, const + lam * float(prior @ prior), P, mu)
-    k = len(c)
-    best_x, best_f, best_zero, best_kkt = None, np.inf, None, 0.0
+    return CertifiedWeightSolver(G, pairs, lam, gap_tol=gap_tol, max_nodes=max_nodes).solve(c, const, prior,
+                                                                                             start=start)
 
-    def round_and_consider(x, zero):
-        """Exact box-QP on the branch that zeroes the smaller weight of every pair of x."""
-        nonlocal best_x, best_f, best_zero, best_kkt
-        z = zero.copy()
-        if len(P):
-            z[np.where(x[P[:, 0]] >= x[P[:, 1]], P[:, 1], P[:, 0])] = True
-        xb, fb, kkt = inst.qp(z)
-        if fb < best_f:
-            best_x, best_f, best_zero, best_kkt = xb, fb, z, kkt
 
-    def threshold():  # a node must beat the incumbent by more than the tolerance to be kept
-        return best_f - gap_tol * (1.0 + abs(best_f)) if np.isfinite(best_f) else np.inf
+class CertifiedWeightSolver:
+    """:func:`certified_weights` for many examples that share G, lambda and the pairs (the examples
+    of one weight step): the checks, ``H``, its eigenvalues and the DAQP workspace are set up once.
 
-    if start is not None:
-        round_and_consider(np.clip(np.asarray(start, np.float64).reshape(-1), 0.0, 1.0), np.zeros(k, bool))
-    tick = itertools.count()
-    root = np.zeros(k, bool)
-    x, f, flags = inst.relaxation(root)
-    round_and_consider(x, root)
-    heap = [(f, next(tick), root, x, flags)]
-    closed_bound = np.inf  # smallest bound among pruned nodes
-    pruned = 0
-    while heap:
-        f, _, zero, x, flags = heapq.heappop(heap)
-        if f >= threshold():
-            # best-first: every node still open is bounded below by f, so the tree closes here
-            closed_bound = min(closed_bound, f)
-            pruned += 1 + len(heap)
-            break
-        smaller = np.minimum(x[P[:, 0]], x[P[:, 1]]) if len(P) else np.zeros(0)
-        if not len(P) or smaller.max() <= _PAIR_TOL:
-            # the relaxation's minimiser satisfies every pair: it solves this node's subtree
-            round_and_consider(x, zero)
-            continue
-        if inst.count > max_nodes:
-            raise SolverError(f"certified weights: branch and bound exceeded {max_nodes} nodes "
-                              f"(gap {best_f - f:.3g})", "max_nodes")
-        a, b = P[int(np.argmax(smaller))]
-        for i in (a, b):  # branch: x_a = 0 | x_b = 0
-            child = zero.copy()
-            child[i] = True
-            xc, fc, fl = inst.relaxation(child, flags)
-            if fc < threshold():
-                heapq.heappush(heap, (fc, next(tick), child, xc, fl))
-            else:
-                pruned += 1
-                closed_bound = min(closed_bound, fc)
-    lower = min(best_f, closed_bound)
-    comp, bnd = _violations(best_x, P)
-    return CertifiedSolution(
-        x=best_x, objective=float(best_f), lower_bound=float(lower), gap=float(max(0.0, best_f - lower)),
-        nodes=inst.count, pruned=pruned, zeroed=tuple(int(i) for i in np.flatnonzero(best_zero)),
-        kkt_residual=best_kkt, max_complementarity=comp, max_bound_violation=bnd,
-        seconds=time.perf_counter() - t0, gap_tol=gap_tol,
-    )
+    >>> solver = CertifiedWeightSolver(G, pairs, lam)            # doctest: +SKIP
+    >>> [solver.solve(C[:, j], const[j], prior[j]) for j in range(m)]   # doctest: +SKIP
+    """
+
+    def __init__(self, G, pairs, lam: float = 0.0, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):
+        H, P, ev_min = _check_shared(G, lam, pairs)
+        self.lam, self.gap_tol, self.max_nodes = float(lam), gap_tol, max_nodes
+        self._ws = _Workspace(H, P, ev_min)
+
+    def solve(self, c, const, prior=None, *, start=None) -> CertifiedSolution:
+        """One example (see :func:`certified_weights` for the parameters)."""
+        gap_tol, max_nodes = self.gap_tol, self.max_nodes
+        t0 = time.perf_counter()
+        inst, P, k, lam = self._ws, self._ws.P, self._ws.k, self.lam
+        c, prior = _check_example(k, c, prior)
+        inst.set_example(-2.0 * (c + lam * prior), float(const) + lam * float(prior @ prior))
+        best_x, best_f, best_zero, best_kkt = None, np.inf, None, 0.0
+
+        def round_and_consider(x, zero):
+            """Exact box-QP on the branch that zeroes the smaller weight of every pair of x."""
+            nonlocal best_x, best_f, best_zero, best_kkt
+            z = zero.copy()
+            if len(P):
+                z[np.where(x[P[:, 0]] >= x[P[:, 1]], P[:, 1], P[:, 0])] = True
+            xb, fb, kkt = inst.qp(z)
+            if fb < best_f:
+                best_x, best_f, best_zero, best_kkt = xb, fb, z, kkt
+
+        def threshold():  # a node must beat the incumbent by more than the tolerance to be kept
+            return best_f - gap_tol * (1.0 + abs(best_f)) if np.isfinite(best_f) else np.inf
+
+        if start is not None:
+            round_and_consider(np.clip(np.asarray(start, np.float64).reshape(-1), 0.0, 1.0), np.zeros(k, bool))
+        tick = itertools.count()
+        root = np.zeros(k, bool)
+        x, f, flags = inst.relaxation(root)
+        round_and_consider(x, root)
+        heap = [(f, next(tick), root, x, flags)]
+        closed_bound = np.inf  # smallest bound among pruned nodes
+        pruned = 0
+        while heap:
+            f, _, zero, x, flags = heapq.heappop(heap)
+            if f >= threshold():
+                # best-first: every node still open is bounded below by f, so the tree closes here
+                closed_bound = min(closed_bound, f)
+                pruned += 1 + len(heap)
+                break
+            smaller = np.minimum(x[P[:, 0]], x[P[:, 1]]) if len(P) else np.zeros(0)
+            if not len(P) or smaller.max() <= _PAIR_TOL:
+                # the relaxation's minimiser satisfies every pair: it solves this node's subtree
+                round_and_consider(x, zero)
+                continue
+            if inst.count > max_nodes:
+                raise SolverError(f"certified weights: branch and bound exceeded {max_nodes} nodes "
+                                  f"(gap {best_f - f:.3g})", "max_nodes")
+            a, b = P[int(np.argmax(smaller))]
+            for i in (a, b):  # branch: x_a = 0 | x_b = 0
+                child = zero.copy()
+                child[i] = True
+                xc, fc, fl = inst.relaxation(child, flags)
+                if fc < threshold():
+                    heapq.heappush(heap, (fc, next(tick), child, xc, fl))
+                else:
+                    pruned += 1
+                    closed_bound = min(closed_bound, fc)
+        lower = min(best_f, closed_bound)
+        comp, bnd = _violations(best_x, P)
+        return CertifiedSolution(
+            x=best_x, objective=float(best_f), lower_bound=float(lower), gap=float(max(0.0, best_f - lower)),
+            nodes=inst.count, pruned=pruned, zeroed=tuple(int(i) for i in np.flatnonzero(best_zero)),
+            kkt_residual=best_kkt, max_complementarity=comp, max_bound_violation=bnd,
+            seconds=time.perf_counter() - t0, gap_tol=gap_tol,
+        )
 
 
 def brute_force_weights(G, c, const, pairs, prior=None, lam: float = 0.0):
@@ -364,10 +398,12 @@ def brute_force_weights(G, c, const, pairs, prior=None, lam: float = 0.0):
 
     Returns (x, objective, branches solved).
     """
-    G, c, const, prior, lam, P, H, _ = _check_instance(G, c, const, prior, lam, pairs)
+    H, P, ev_min = _check_shared(G, lam, pairs)
+    c, prior = _check_example(len(H), c, prior)
     if len(P) > 16:
         raise InputError(f"brute force: expected at most 16 pairs, found {len(P)}")
-    inst = _Instance(H, -2.0 * (c + lam * prior), const + lam * float(prior @ prior), P)
+    inst = _Workspace(H, P, ev_min)
+    inst.set_example(-2.0 * (c + lam * prior), float(const) + lam * float(prior @ prior))
     best = (None, np.inf)
     for choice in itertools.product((0, 1), repeat=len(P)):
         zero = np.zeros(len(c), bool)
@@ -385,7 +421,8 @@ def weight_objective(x, G, c, const, prior=None, lam: float = 0.0) -> float:
     return float(x @ G @ x - 2.0 * c @ x + const + lam * np.sum((x - prior) ** 2))
 
 
-__all__ = ["BoxQPSolution", "CertifiedSolution", "box_qp_kkt", "solve_box_qp", "certified_weights",
+__all__ = ["BoxQPSolution", "CertifiedSolution", "CertifiedWeightSolver", "box_qp_kkt", "solve_box_qp",
+           "certified_weights",
            "brute_force_weights", "weight_objective"]
 
 

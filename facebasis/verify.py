@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .certify import certified_weights, weight_objective
+from .certify import CertifiedWeightSolver, weight_objective
 from .errors import InputError
 
 INPUTS_FILE = "inputs.json"
@@ -108,9 +108,10 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     G = B @ B.T
     C = B @ targets.T
     out = []
+    certifier = CertifiedWeightSolver(G, pairs, lam)
     for j, name in enumerate(names):
         const = float(targets[j] @ targets[j])
-        cs = certified_weights(G, C[:, j], const, pairs, prior[j], lam, start=stored[j])
+        cs = certifier.solve(C[:, j], const, prior[j], start=stored[j])
         x = stored[j]
         f = weight_objective(x, G, C[:, j], const, prior[j], lam)
         comp = float(np.max(np.abs(x[pairs[:, 0]] * x[pairs[:, 1]]))) if len(pairs) else 0.0

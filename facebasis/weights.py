@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .certify import certified_weights
+from .certify import CertifiedWeightSolver
 from .errors import InputError, SolverError
 
 #: IPOPT return statuses that count as a successful solve.
@@ -205,14 +205,15 @@ class WeightSolver:
     def _polish(self, G, C, const, X_prior, lam, X_ipopt):
         """Certified global optimum of every example, starting from IPOPT's branch.
 
-        :func:`~facebasis.certify.certified_weights` (branch and bound over the pairs, exact box-QPs)
+        :class:`~facebasis.certify.CertifiedWeightSolver` (branch and bound over the pairs, exact box-QPs)
         seeded with IPOPT's answer: the result satisfies bounds and pairs exactly and is never worse
         than IPOPT's. Returns weights, max KKT residual, total nodes and the max certificate gap.
         """
         X = np.empty_like(X_ipopt)
         kkt, nodes, gap = 0.0, 0, 0.0
+        certifier = CertifiedWeightSolver(G, self.pairs, lam)  # shared by all examples of this step
         for j in range(self.m):  # examples are independent given the blendshapes
-            cs = certified_weights(G, C[:, j], const[j], self.pairs, X_prior[j], lam, start=X_ipopt[j])
+            cs = certifier.solve(C[:, j], const[j], X_prior[j], start=X_ipopt[j])
             X[j] = cs.x
             kkt, nodes, gap = max(kkt, cs.kkt_residual), nodes + cs.nodes, max(gap, cs.gap)
         return X, kkt, nodes, gap

@@ -256,21 +256,24 @@ class PenetrationReport:
     zones: dict
 
 
-def _as_set(P):
-    return set(map(tuple, np.asarray(P).tolist()))
+def pair_set(V, F, face_mask=None, name: str = "reference") -> set:
+    """The intersecting pairs of a mesh as a set of (i, j) tuples, for :func:`penetration_report`'s
+    ``reference_pairs`` when one reference serves many meshes."""
+    return set(map(tuple, intersecting_pairs(V, F, face_mask, name=name).tolist()))
 
 
-def penetration_report(V, F, references=(), face_mask=None, zones=None) -> PenetrationReport:
-    """Count intersecting pairs of (V, F) and the pairs new relative to every reference mesh.
+def penetration_report(V, F, references=(), face_mask=None, zones=None, reference_pairs=()) -> PenetrationReport:
+    """Count intersecting pairs of (V, F) and the pairs new relative to every reference.
 
     references : meshes (n, 3) in the same topology (e.g. the target neutral and the template shape
         the result came from); a pair present in any of them is not new
+    reference_pairs : the same given as sets from :func:`pair_set` (computed once, reused)
     zones : optional {name: (n,) bool vertex mask}, for locating the new pairs
     """
     P = intersecting_pairs(V, F, face_mask)
-    seen = set()
+    seen = set().union(*reference_pairs)
     for R in references:
-        seen |= _as_set(intersecting_pairs(R, F, face_mask, name="reference"))
+        seen |= pair_set(R, F, face_mask)
     new = np.array([p for p in P.tolist() if tuple(p) not in seen], dtype=np.int64).reshape(-1, 2)
     counts = {}
     if zones is not None:
@@ -285,4 +288,4 @@ def penetration_report(V, F, references=(), face_mask=None, zones=None) -> Penet
 
 
 __all__ = ["orient3d", "triangle_pairs_intersect", "candidate_triangle_pairs", "intersecting_pairs",
-           "region_faces", "parse_region", "PenetrationReport", "penetration_report"]
+           "region_faces", "parse_region", "PenetrationReport", "penetration_report", "pair_set"]

@@ -70,12 +70,10 @@ class DeformationTransfer:
         self.virtual_edges = virtual_edges
         self.virtual_mode = virtual_mode
         if virtual_edges is not None:
-            from .virtual_edges import VIRTUAL_MODES
+            from .virtual_edges import DEFAULT_VIRTUAL_WEIGHT, VIRTUAL_MODES
 
             if virtual_mode not in VIRTUAL_MODES:
                 raise InputError(f"virtual edge mode: expected one of {VIRTUAL_MODES}, found {virtual_mode!r}")
-            from .virtual_edges import DEFAULT_VIRTUAL_WEIGHT
-
             if extra_rows is not None:
                 raise InputError("DeformationTransfer: expected either virtual_edges or extra_rows, found both")
             if virtual_edges.n_vertices != template.n_vertices:

@@ -135,7 +135,6 @@ def geodesic_pair_distances(V, F, pairs, limit: float, memory_bytes: int = 64 * 
     vertices within ``limit`` (Euclidean) of the cell's box: every path no longer than ``limit``
     stays there, so the distances are the same as on the whole graph, at a fraction of the cost.
     """
-
     pairs = np.asarray(pairs, np.int64)
     out = np.full(len(pairs), np.inf)
     if len(pairs) == 0:
@@ -144,9 +143,9 @@ def geodesic_pair_distances(V, F, pairs, limit: float, memory_bytes: int = 64 * 
     order = np.argsort(pairs[:, 0], kind="stable")
     P = pairs[order]
     src = np.unique(P[:, 0])
-    if not np.isfinite(limit):
-        groups = [src[i:i + max(1, int(memory_bytes // (8 * len(V))))]
-                  for i in range(0, len(src), max(1, int(memory_bytes // (8 * len(V)))))]
+    if not np.isfinite(limit):  # whole-graph searches, as many sources as the memory budget allows
+        chunk = max(1, int(memory_bytes // (8 * len(V))))
+        groups = [src[i:i + chunk] for i in range(0, len(src), chunk)]
     else:
         cell = np.floor((V[src] - V.min(0)) / (2.0 * limit)).astype(np.int64)
         key = (cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]) * (cell[:, 2].max() + 1) + cell[:, 2]

@@ -160,7 +160,7 @@ def bench_virtual(repeat: int) -> dict:
     transferred onto a target outside the identity space (identity seed 0 scaled 3x)."""
     import numpy as np
 
-    from facebasis.penetration import intersecting_pairs
+    from facebasis.penetration import pair_set, penetration_report
     from facebasis.transfer import DeformationTransfer
     from facebasis.virtual_edges import detect_virtual_edges
     from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
@@ -183,17 +183,15 @@ def bench_virtual(repeat: int) -> dict:
           f"{int((~layered[E]).any(1).sum())} with an end elsewhere; masked to lips + lids: {len(ve_mask)} edges")
     c, _ = ict_random_identity(0)
     B0 = ict_identity(3.0 * c)
-    neutral_pairs = set(map(tuple, intersecting_pairs(B0, F).tolist()))
-    template_pairs = [set(map(tuple, intersecting_pairs(rig.neutral + d, F).tolist())) for d in rig.deltas]
+    neutral_pairs = pair_set(B0, F)
+    template_pairs = [pair_set(rig.neutral + d, F) for d in rig.deltas]
+    lips_lids = {"lips": zones["lips"], "lids": zones["lids"]}
 
-    def new_pairs(result):
+    def new_pairs(result):  # per expression: (new pairs, in the lips zone, in the lids zone)
         out = []
         for i, d in enumerate(result.deltas):
-            P = set(map(tuple, intersecting_pairs(B0 + d, F).tolist())) - neutral_pairs - template_pairs[i]
-            P = np.array(sorted(P), dtype=np.int64).reshape(-1, 2)
-            lips = zones["lips"][F[P[:, 0]]].any(1) | zones["lips"][F[P[:, 1]]].any(1)
-            lids = ~lips & (zones["lids"][F[P[:, 0]]].any(1) | zones["lids"][F[P[:, 1]]].any(1))
-            out.append((len(P), int(lips.sum()), int(lids.sum())))
+            rep = penetration_report(B0 + d, F, zones=lips_lids, reference_pairs=(neutral_pairs, template_pairs[i]))
+            out.append((len(rep.new), rep.zones["lips"], rep.zones["lids"]))
         return np.array(out)
 
     t0 = time.perf_counter()

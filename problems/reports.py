@@ -71,7 +71,7 @@ def _crop(V, mask, view="front", pad=0.25):
 def _penetration(data: str, out: Path) -> list[Path]:
     """Plain transfer vs virtual edges on a target with thinner / reshaped layers; counts per
     expression (table) and close-ups (figure)."""
-    from facebasis.penetration import intersecting_pairs
+    from facebasis.penetration import pair_set, penetration_report
     from facebasis.report import penetration_figure, write_table
     from facebasis.transfer import DeformationTransfer
     from facebasis.virtual_edges import detect_virtual_edges
@@ -98,19 +98,18 @@ def _penetration(data: str, out: Path) -> list[Path]:
     ve = detect_virtual_edges(template.neutral, F)
     plain = DeformationTransfer(template, target).transfer()
     guarded = DeformationTransfer(template, target, virtual_edges=ve).transfer()
-    neutral_pairs = set(map(tuple, intersecting_pairs(target, F).tolist()))
+    neutral_pairs = pair_set(target, F)
     rows, arrays = [], {"faces": F}
     for i, name in enumerate(template.names):
-        tpl = set(map(tuple, intersecting_pairs(template.neutral + template.deltas[i], F).tolist()))
+        refs = (neutral_pairs, pair_set(template.neutral + template.deltas[i], F))
         counts = []
         for kind, rig in (("plain", plain), ("ve", guarded)):
             X = target + rig.deltas[i]
-            P = np.array(sorted(set(map(tuple, intersecting_pairs(X, F).tolist())) - neutral_pairs - tpl),
-                         dtype=np.int64).reshape(-1, 2)
-            counts.append(len(P))
+            new = penetration_report(X, F, reference_pairs=refs).new
+            counts.append(len(new))
             if name in show:
                 arrays[f"{name}/{kind}"] = X
-                arrays[f"{name}/{kind}_hits"] = np.unique(P.ravel())
+                arrays[f"{name}/{kind}_hits"] = np.unique(new.ravel())
         rows.append((name, counts[0], counts[1]))
     total = (sum(r[1] for r in rows), sum(r[2] for r in rows))
     rows.append(("total", total[0], total[1]))

@@ -55,7 +55,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         from .synthetic import default_face_problem
 
         from .generation import GenerationOptions, generate_blendshapes, reproduction_error
-        from .results import history_to_json, write_problem_inputs, write_rig_run
+        from .results import write_problem_inputs, write_rig_run
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
         options = GenerationOptions(iterations=3 if quick else 10)
@@ -67,8 +67,8 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         result = generate_blendshapes(pp.problem, options, progress)
         # the run as `facebasis rig` writes it, with its inputs as files (`facebasis verify OUT/rig`)
         examples_dir, weights_file = write_problem_inputs(stage / "rig_inputs", pp.problem)
-        write_rig_run(stage / "rig", result, options, pp.problem, examples_dir, weights_file, relative_to=stage / "rig")
-        history = history_to_json(result, options, pp.problem)
+        history = write_rig_run(stage / "rig", result, options, pp.problem, examples_dir, weights_file,
+                                relative_to=stage / "rig")
         gen_err = _relative_errors(result.rig.deltas, person.deltas)
         heldout = {label: reproduction_error(rig, pp.heldout, pp.problem.pair_indices)
                    for label, rig in (("example-based", result.rig), ("deformation transfer", transferred))}

@@ -374,8 +374,6 @@ class BlendshapeGenerator:
         F = tpl.faces
         self.dt = DeformationTransfer(tpl, problem.target_neutral, virtual_edges=problem.virtual_edges,
                                       virtual_weight=opts.virtual_weight, virtual_mode=opts.virtual_mode)
-        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer
-        self.virtual_cols = self.dt.virtual_edge_cols()
         m_tri = len(F)
         # template frame deltas A_i^S - A_0^S (k, 3, 3, m_tri), computed once for eq. 3's prior and w_i
         dA = frames_cm(tpl.neutral + tpl.deltas, F)
@@ -401,7 +399,9 @@ class BlendshapeGenerator:
         # rows (a, 3k) with columns (coordinate, shape)
         av = self.dt.anchor_values()  # (k, a, 3)
         self.anchor_rows = np.ascontiguousarray(av.transpose(1, 2, 0)).reshape(av.shape[1], -1)
-        vc = self.virtual_cols  # (k*3, e), rows (shape, coordinate)
+        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer:
+        # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
+        vc = self.dt.virtual_edge_cols()
         self.virtual_rows = None if vc is None else np.ascontiguousarray(
             vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         self.precompute_seconds = time.perf_counter() - t0

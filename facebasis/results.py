@@ -20,10 +20,10 @@ def history_to_json(result, options, problem) -> dict:
     }
 
 
-def write_rig_run(folder, result, options, problem, examples_dir, weights_file, relative_to=None) -> None:
+def write_rig_run(folder, result, options, problem, examples_dir, weights_file, relative_to=None) -> dict:
     """Write a generation run as `facebasis rig` writes it, into an existing (staging) folder:
     ``<shape>.obj`` + ``neutral.obj``, ``weights.json``, ``history.json``, ``residuals.json``,
-    ``inputs.json`` (for `facebasis verify`) and ``rig.glb``."""
+    ``inputs.json`` (for `facebasis verify`) and ``rig.glb``. Returns the history written."""
     from pathlib import Path
 
     from .atomic import atomic_write_json
@@ -36,13 +36,15 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
     write_shapes(folder, result.rig)
     names = problem.example_names
     atomic_write_json(folder / "weights.json", weights_to_json(result.weights, names, problem.template.names))
-    atomic_write_json(folder / "history.json", history_to_json(result, options, problem))
+    history = history_to_json(result, options, problem)
+    atomic_write_json(folder / "history.json", history)
     atomic_write_json(folder / "residuals.json", {
         "threshold": options.missing_threshold,
         "relative_residual": dict(zip(names, map(float, result.residuals))),
         "missing": list(result.missing)})
     write_inputs(folder, examples_dir, weights_file, problem.exclusive, options.schedule()[-1][1], relative_to)
     write_glb(result.rig, folder / "rig.glb")
+    return history
 
 
 def write_problem_inputs(folder, problem):

@@ -157,11 +157,29 @@ def cmd_penetration(args) -> int:
         same_topology(F, FR, str(args.mesh), str(r))
         refs.append(R)
     face_mask = region_faces(F, parse_region(args.region, len(V))) if args.region else None
-    rep = penetration_report(V, F, refs, face_mask)
+    rest, within = None, None
+    if args.rest is not None:
+        from .virtual_edges import median_edge_length
+
+        rest, FR = read_mesh(args.rest)
+        if len(rest) != len(V):
+            from .errors import TopologyError
+
+            raise TopologyError(f"{args.rest}: expected {len(V)} vertices as in {args.mesh}, found {len(rest)}")
+        same_topology(F, FR, str(args.mesh), str(args.rest))
+        if not (args.local_within > 0):
+            from .errors import InputError
+
+            raise InputError(f"--local-within: expected a positive number of edge lengths, found {args.local_within}")
+        within = args.local_within * median_edge_length(rest, F)
+    rep = penetration_report(V, F, refs, face_mask, rest=rest, local_within=within)
     where = f" in region {args.region} ({int(face_mask.sum())} triangles)" if face_mask is not None else ""
     print(f"{args.mesh}: {len(rep.pairs)} intersecting triangle pairs{where}")
     if refs:
         print(f"  new relative to {len(refs)} reference(s): {len(rep.new)}")
+    if rest is not None:
+        print(f"  {'new' if refs else 'all'}: {rep.count(local=False)} layer crossings, {rep.count(local=True)} local folds "
+              f"(triangles within {args.local_within:g} median edges = {within:.4g} along {args.rest})")
     shown = rep.new if refs else rep.pairs
     for a, b in shown[: args.show].tolist():
         print(f"  triangles {a} {F[a].tolist()} x {b} {F[b].tolist()}")
@@ -281,6 +299,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", action="append", default=[], metavar="REF",
                    help="same-topology mesh whose intersecting pairs are not new (repeatable)")
     p.add_argument("--region", default=None, metavar="START:END", help="only triangles with all vertices in START..END-1")
+    p.add_argument("--rest", default=None, metavar="REST",
+                   help="rest mesh (e.g. the target neutral): split the pairs into local folds and layer crossings")
+    p.add_argument("--local-within", type=float, default=2.0, metavar="K",
+                   help="with --rest: triangles closer than K median edge lengths along REST are a local fold (default 2)")
     p.add_argument("--show", type=int, default=10, help="list this many pairs (default 10)")
     p.set_defaults(func=cmd_penetration)
 

@@ -248,12 +248,33 @@ class PenetrationReport:
 
     pairs : (p, 2) all intersecting vertex-disjoint pairs; new : (q, 2) those in no reference;
     zones : count of new pairs per named vertex zone (a pair belongs to the first zone holding a
-    vertex of either triangle; the rest are ``elsewhere``).
+    vertex of either triangle; the rest are ``elsewhere``);
+    zone_index : (q,) the zone of each new pair, an index into ``zone_names`` (``elsewhere`` last);
+    local : (q,) True where the two triangles are within ``local_within`` of each other along the
+        rest surface (a fold of the surface onto itself), False for a crossing of two layers that
+        are apart along the surface; None when no rest surface was given.
     """
 
     pairs: np.ndarray
     new: np.ndarray
     zones: dict
+    zone_names: tuple = ()
+    zone_index: np.ndarray | None = None
+    local: np.ndarray | None = None
+
+    def count(self, zone: str | None = None, local: bool | None = None) -> int:
+        """New pairs in ``zone`` (any zone if None), local folds only (True), layer crossings only
+        (False) or both (None)."""
+        keep = np.ones(len(self.new), bool)
+        if zone is not None:
+            if zone not in self.zone_names:
+                raise InputError(f"zone: expected one of {list(self.zone_names)}, found {zone!r}")
+            keep &= self.zone_index == self.zone_names.index(zone)
+        if local is not None:
+            if self.local is None:
+                raise InputError("local: this report was made without a rest surface (rest=, local_within=)")
+            keep &= self.local if local else ~self.local
+        return int(keep.sum())
 
 
 def pair_set(V, F, face_mask=None, name: str = "reference") -> set:
@@ -262,30 +283,69 @@ def pair_set(V, F, face_mask=None, name: str = "reference") -> set:
     return set(map(tuple, intersecting_pairs(V, F, face_mask, name=name).tolist()))
 
 
-def penetration_report(V, F, references=(), face_mask=None, zones=None, reference_pairs=()) -> PenetrationReport:
+def triangle_surface_distance(V, F, pairs, limit: float) -> np.ndarray:
+    """Graph geodesic distance along the surface (V, F) between two triangles, (p,).
+
+    The smallest of the nine vertex-to-vertex distances of each pair (p, 2) of triangle indices, by
+    the bounded Dijkstra of :func:`facebasis.virtual_edges.geodesic_pair_distances` (mesh edges and
+    unfolded segments across adjacent triangles); ``inf`` beyond ``limit``.
+    """
+    from .virtual_edges import geodesic_pair_distances
+
+    P = np.asarray(pairs, np.int64).reshape(-1, 2)
+    if len(P) == 0:
+        return np.zeros(0)
+    A, B = F[P[:, 0]], F[P[:, 1]]
+    vp = np.stack([np.repeat(A, 3, axis=1), np.tile(B, (1, 3))], axis=-1).reshape(-1, 2)  # (9p, 2)
+    return geodesic_pair_distances(V, F, vp, limit=limit).reshape(-1, 9).min(1)
+
+
+def penetration_report(V, F, references=(), face_mask=None, zones=None, reference_pairs=(), rest=None,
+                       local_within: float | None = None) -> PenetrationReport:
     """Count intersecting pairs of (V, F) and the pairs new relative to every reference.
 
     references : meshes (n, 3) in the same topology (e.g. the target neutral and the template shape
         the result came from); a pair present in any of them is not new
     reference_pairs : the same given as sets from :func:`pair_set` (computed once, reused)
     zones : optional {name: (n,) bool vertex mask}, for locating the new pairs
+    rest, local_within : optional rest mesh (n, 3) (e.g. the target neutral) and a distance: new
+        pairs whose triangles are within ``local_within`` along the rest surface
+        (:func:`triangle_surface_distance`) are *local folds*, the others *layer crossings*. Virtual
+        edges (seed 004) join points far apart along the surface, so they address the second kind.
     """
+    if (rest is None) != (local_within is None):
+        raise InputError("penetration_report: expected rest and local_within together, found only "
+                         + ("rest" if rest is not None else "local_within"))
+    if local_within is not None and not (np.isfinite(local_within) and local_within > 0):
+        raise InputError(f"local_within: expected a positive distance, found {local_within}")
+    if rest is not None:
+        rest = np.asarray(rest, np.float64)
+        if rest.shape != np.shape(V):
+            raise InputError(f"rest: expected vertices of shape {np.shape(V)}, found {rest.shape}")
     P = intersecting_pairs(V, F, face_mask)
     seen = set().union(*reference_pairs)
     for R in references:
         seen |= pair_set(R, F, face_mask)
     new = np.array([p for p in P.tolist() if tuple(p) not in seen], dtype=np.int64).reshape(-1, 2)
-    counts = {}
+    counts, names = {}, ()
+    zone_index = None
     if zones is not None:
+        names = tuple(zones) + ("elsewhere",)
+        zone_index = np.full(len(new), len(names) - 1, dtype=np.int64)
         left = np.ones(len(new), bool)
-        for zname, mask in zones.items():
+        for z, (zname, mask) in enumerate(zones.items()):
             m = np.asarray(mask, bool)
             inz = left & (m[F[new[:, 0]]].any(1) | m[F[new[:, 1]]].any(1))
             counts[zname] = int(inz.sum())
+            zone_index[inz] = z
             left &= ~inz
         counts["elsewhere"] = int(left.sum())
-    return PenetrationReport(P, new, counts)
+    local = None
+    if rest is not None:
+        local = triangle_surface_distance(rest, F, new, float(local_within)) < local_within
+    return PenetrationReport(P, new, counts, names, zone_index, local)
 
 
 __all__ = ["orient3d", "triangle_pairs_intersect", "candidate_triangle_pairs", "intersecting_pairs",
-           "region_faces", "parse_region", "PenetrationReport", "penetration_report", "pair_set"]
+           "region_faces", "parse_region", "PenetrationReport", "penetration_report", "pair_set",
+           "triangle_surface_distance"]

@@ -164,7 +164,7 @@ def bench_virtual(repeat: int) -> dict:
 
     from facebasis.penetration import pair_set, penetration_report
     from facebasis.transfer import DeformationTransfer
-    from facebasis.virtual_edges import detect_virtual_edges
+    from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
     from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
 
     rig = ict_rig()
@@ -189,11 +189,14 @@ def bench_virtual(repeat: int) -> dict:
     template_pairs = [pair_set(rig.neutral + d, F) for d in rig.deltas]
     lips_lids = {"lips": zones["lips"], "lids": zones["lids"]}
 
-    def new_pairs(result):  # per expression: (new pairs, in the lips zone, in the lids zone)
+    local_within = 2.0 * median_edge_length(B0, F)
+
+    def new_pairs(result):  # per expression: new pairs (all, lips, lids), then layer crossings only (same)
         out = []
         for i, d in enumerate(result.deltas):
-            rep = penetration_report(B0 + d, F, zones=lips_lids, reference_pairs=(neutral_pairs, template_pairs[i]))
-            out.append((len(rep.new), rep.zones["lips"], rep.zones["lids"]))
+            rep = penetration_report(B0 + d, F, zones=lips_lids, reference_pairs=(neutral_pairs, template_pairs[i]),
+                                     rest=B0, local_within=local_within)
+            out.append([rep.count(z, local) for local in (None, False) for z in (None, "lips", "lids")])
         return np.array(out)
 
     t0 = time.perf_counter()
@@ -204,6 +207,9 @@ def bench_virtual(repeat: int) -> dict:
           "not in the target neutral nor in the template shape (same triangles)")
     print(f"  plain transfer ({t_plain:.2f} s): {base[:, 0].sum()} new pairs over {rig.n_shapes} expressions "
           f"(lips {base[:, 1].sum()}, lids {base[:, 2].sum()}, elsewhere {base[:, 0].sum() - base[:, 1].sum() - base[:, 2].sum()})")
+    print(f"    of which layer crossings (triangles >= 2 median edges = {local_within:.3f} cm apart along the target "
+          f"neutral): {base[:, 3].sum()} (lips {base[:, 4].sum()}, lids {base[:, 5].sum()}); local folds "
+          f"{base[:, 0].sum() - base[:, 3].sum()}")
     results = {}
     outside = ~layered
     for label, ve, mode, w in (("gradient, w 1", ve_all, "gradient", 1.0), ("gradient, w 3", ve_all, "gradient", 3.0),
@@ -221,6 +227,9 @@ def bench_virtual(repeat: int) -> dict:
         print(f"  {label:31s} ({secs:.2f} s): {cnt[:, 0].sum():5d} new pairs (lips {cnt[:, 1].sum()}, lids "
               f"{cnt[:, 2].sum()}), {100 * red:5.1f}% fewer than plain [target >= 90%, none at the lids]; away from lips "
               f"and lids: max difference to plain {diff[:, outside].max():.3f} cm, relative {rel_out:.3f}")
+        red_x = 1.0 - cnt[:, 3].sum() / max(1, base[:, 3].sum())
+        print(f"    layer crossings {cnt[:, 3].sum():5d} (lips {cnt[:, 4].sum()}, lids {cnt[:, 5].sum()}), {100 * red_x:5.1f}% "
+              f"fewer than plain; local folds {cnt[:, 0].sum() - cnt[:, 3].sum()}")
     best = max(results, key=results.get)
     print("  per expression, plain -> " + best + " (largest 12 by plain count):")
     ve, mode, w = (ve_mask, "gradient", 1.0) if "mask" in best else (ve_all, best.split(",")[0],
@@ -228,6 +237,9 @@ def bench_virtual(repeat: int) -> dict:
     cnt = new_pairs(DeformationTransfer(rig, B0, virtual_edges=ve, virtual_weight=w, virtual_mode=mode).transfer())
     order = np.argsort(-base[:, 0])[:12]
     print("    " + ", ".join(f"{rig.names[i]} {base[i, 0]}->{cnt[i, 0]}" for i in order))
+    order = np.argsort(-cnt[:, 3])[:8]
+    print("  layer crossings left with " + best + " (largest 8; plain -> virtual edges): "
+          + ", ".join(f"{rig.names[i]} {base[i, 3]}->{cnt[i, 3]}" for i in order))
     return results
 
 

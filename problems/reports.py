@@ -74,7 +74,7 @@ def _penetration(data: str, out: Path) -> list[Path]:
     from facebasis.penetration import pair_set, penetration_report
     from facebasis.report import penetration_figure, write_table
     from facebasis.transfer import DeformationTransfer
-    from facebasis.virtual_edges import detect_virtual_edges
+    from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
 
     if data == "ict":
         from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
@@ -99,26 +99,30 @@ def _penetration(data: str, out: Path) -> list[Path]:
     plain = DeformationTransfer(template, target).transfer()
     guarded = DeformationTransfer(template, target, virtual_edges=ve).transfer()
     neutral_pairs = pair_set(target, F)
+    local_within = 2.0 * median_edge_length(target, F)  # closer along the target neutral: a local fold
     rows, arrays = [], {"faces": F}
     for i, name in enumerate(template.names):
         refs = (neutral_pairs, pair_set(template.neutral + template.deltas[i], F))
         counts = []
         for kind, rig in (("plain", plain), ("ve", guarded)):
             X = target + rig.deltas[i]
-            new = penetration_report(X, F, reference_pairs=refs).new
-            counts.append(len(new))
+            rep = penetration_report(X, F, reference_pairs=refs, rest=target, local_within=local_within)
+            new = rep.new
+            counts.append((len(new), rep.count(local=False)))
             if name in show:
                 arrays[f"{name}/{kind}"] = X
                 arrays[f"{name}/{kind}_hits"] = np.unique(new.ravel())
-        rows.append((name, counts[0], counts[1]))
-    total = (sum(r[1] for r in rows), sum(r[2] for r in rows))
-    rows.append(("total", total[0], total[1]))
-    paths = write_table(out, "penetration", ("expression", "new pairs, plain transfer", "new pairs, virtual edges"), rows)
+        rows.append((name, counts[0][0], counts[1][0], counts[0][1], counts[1][1]))
+    total = tuple(sum(r[j] for r in rows) for j in range(1, 5))
+    rows.append(("total",) + total)
+    paths = write_table(out, "penetration", ("expression", "new pairs, plain transfer", "new pairs, virtual edges",
+                                             "layer crossings, plain", "layer crossings, virtual edges"), rows)
     arrays["names"] = [n for n in show if f"{n}/plain" in arrays]
     arrays["crops"] = {"lips": _crop(template.neutral, zones["lips"]), "lids": _crop(template.neutral, zones["lids"])}
     paths += penetration_figure(arrays, out)
     print(f"  penetration ({label}): {total[0]} new intersecting pairs with plain transfer, {total[1]} with "
-          f"virtual edges ({len(ve)} edges)")
+          f"virtual edges ({len(ve)} edges); layer crossings (triangles >= 2 median edges apart along the target "
+          f"neutral) {total[2]} and {total[3]}")
     return paths
 
 

@@ -8,8 +8,9 @@ import pytest
 from conftest import grid_sheet, requires_ict
 from facebasis.cli import main
 from facebasis.errors import InputError
-from facebasis.meshio import write_mesh
-from facebasis.penetration import intersecting_pairs, orient3d, penetration_report, triangle_pairs_intersect
+from facebasis.meshio import read_mesh, write_mesh
+from facebasis.penetration import (intersecting_pairs, orient3d, penetration_report, triangle_pairs_intersect,
+                                   triangle_surface_distance)
 from facebasis.rig import Rig
 from facebasis.transfer import DeformationTransfer
 from facebasis.virtual_edges import VirtualEdges, detect_virtual_edges, virtual_edge_targets
@@ -283,6 +284,53 @@ def test_penetration_report_new_pairs_and_zones():
     assert len(rep2.new) == 0
 
 
+def tucked_strip():
+    """A flat strip (rest) and a copy tucked under itself: column 3 is pulled back under column 0..1
+    and the rest of the strip laid back over it, so triangles two columns apart along the surface
+    cross (a local fold, no second layer)."""
+    V, F = grid_sheet(10, 4, size=2.25)
+    step = V[1, 0] - V[0, 0]
+    col = np.rint(V[:, 0] / step).astype(int)
+    X = V.copy()
+    X[col == 3] = np.c_[np.full((col == 3).sum(), 0.5 * step), V[col == 3, 1], np.full((col == 3).sum(), -0.2 * step)]
+    X[col >= 4, 0] = (col[col >= 4] - 3) * step
+    X[col >= 4, 2] = 0.2 * step
+    return V, X, F, step
+
+
+def test_penetration_report_tells_local_folds_from_layer_crossings():
+    V, X, F, step = tucked_strip()
+    fold = penetration_report(X, F, references=[V], rest=V, local_within=4 * step)
+    assert len(fold.new) > 0 and fold.local.all() and fold.count(local=True) == len(fold.new)
+    # two vertex-disjoint triangles are at least one edge apart along the surface
+    assert not penetration_report(X, F, references=[V], rest=V, local_within=0.8 * step).local.any()
+    assert np.all(triangle_surface_distance(V, F, fold.new, np.inf) >= step - 1e-12)
+    # the pressed two-layer strip: the layers are far apart along the surface (around the fold)
+    rig, target, layer = press_rig(gap=0.4)
+    Xp = target + DeformationTransfer(rig, target).transfer().deltas[0]
+    press = penetration_report(Xp, rig.faces, references=[target], rest=target, local_within=1.0,
+                               zones={"top": layer == 2})
+    assert len(press.new) > 0 and press.count(local=False) == len(press.new) == press.count("top", local=False)
+
+
+def test_penetration_report_errors():
+    V, X, F, step = tucked_strip()
+    with pytest.raises(InputError, match="expected rest and local_within together, found only rest"):
+        penetration_report(X, F, rest=V)
+    with pytest.raises(InputError, match="expected rest and local_within together, found only local_within"):
+        penetration_report(X, F, local_within=1.0)
+    with pytest.raises(InputError, match="local_within: expected a positive distance, found -1"):
+        penetration_report(X, F, rest=V, local_within=-1.0)
+    with pytest.raises(InputError, match=r"rest: expected vertices of shape \(40, 3\), found \(39, 3\)"):
+        penetration_report(X, F, rest=V[:-1], local_within=1.0)
+    rep = penetration_report(X, F, references=[V], zones={"a": np.ones(len(V), bool)})
+    with pytest.raises(InputError, match="zone: expected one of \\['a', 'elsewhere'\\], found 'lids'"):
+        rep.count("lids")
+    with pytest.raises(InputError, match="made without a rest surface"):
+        rep.count(local=True)
+    assert rep.count("a") == len(rep.new) > 0 and rep.count("elsewhere") == 0
+
+
 # --- CLI ---------------------------------------------------------------------------------------
 
 def test_cli_virtual_edges_penetration_and_transfer(tmp_path, capsys):
@@ -305,6 +353,17 @@ def test_cli_virtual_edges_penetration_and_transfer(tmp_path, capsys):
     assert "new relative to 1 reference(s): 0" not in out
     assert main(["penetration", str(tmp_path / "ve" / "press.obj")]) == 0
     assert ": 0 intersecting triangle pairs" in capsys.readouterr().out
+    # the pressed layers cross far from each other along the surface: layer crossings, no local folds
+    n_new = len(penetration_report(read_mesh(tmp_path / "plain" / "press.obj")[0], rig.faces, references=[target]).new)
+    assert main(["penetration", str(tmp_path / "plain" / "press.obj"), "--reference", str(tmp_path / "target.obj"),
+                 "--rest", str(tmp_path / "target.obj")]) == 0
+    assert f"new: {n_new} layer crossings, 0 local folds (triangles within 2 median edges" in capsys.readouterr().out
+    assert main(["penetration", str(tmp_path / "plain" / "press.obj"), "--rest", str(tmp_path / "target.obj"),
+                 "--local-within", "0"]) == 2
+    assert "--local-within: expected a positive number of edge lengths, found 0" in capsys.readouterr().err
+    write_mesh(tmp_path / "small.obj", target[:-3], rig.faces[:1])
+    assert main(["penetration", str(tmp_path / "plain" / "press.obj"), "--rest", str(tmp_path / "small.obj")]) == 2
+    assert f"small.obj: expected {len(target)} vertices" in capsys.readouterr().err
     assert main(["penetration", str(tmp_path / "ve" / "press.obj"), "--region", "5:2"]) == 2
     assert "--region: expected 0 <= START < END" in capsys.readouterr().err
 

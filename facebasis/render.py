@@ -23,8 +23,12 @@ def project(V, view="front") -> np.ndarray:
     return np.asarray(V, float) @ _rotation(elev, azim).T
 
 
+HIGHLIGHT_RGB = np.array([0.9, 0.05, 0.05])   # red
+HIGHLIGHT2_RGB = np.array([1.0, 0.6, 0.0])    # orange
+
+
 def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vmax=None,
-              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72)):
+              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72), highlight2=None):
     """Draw a shaded mesh into a matplotlib axis (camera looks along -z after the view rotation).
 
     Parameters
@@ -34,7 +38,8 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     values : optional (n,) per-vertex scalars shown as colours (shading still applied)
     view : a key of ``VIEWS`` or an (elevation, azimuth) pair in degrees
     face_mask : optional (m,) bool, triangles to draw
-    highlight : optional (m,) bool, triangles drawn in red on top (e.g. intersecting ones)
+    highlight : optional (m,) bool, triangles drawn in red (e.g. intersecting ones)
+    highlight2 : optional (m,) bool, triangles drawn in orange (e.g. local folds); red wins where both
     crop : optional ((xmin, xmax), (ymin, ymax)) in view coordinates
 
     Returns
@@ -71,9 +76,10 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
         mapper = None
         rgb = np.tile(np.asarray(color, float), (len(F), 1))
     rgb = rgb * shade[:, None]
+    if highlight2 is not None:
+        rgb[np.asarray(highlight2, bool)] = HIGHLIGHT2_RGB
     if highlight is not None:
-        hl = np.asarray(highlight, bool)
-        rgb[hl] = np.array([0.9, 0.05, 0.05])
+        rgb[np.asarray(highlight, bool)] = HIGHLIGHT_RGB
     coll = PolyCollection(tri[order][:, :, :2], facecolors=np.clip(rgb[order], 0, 1),
                           edgecolors="none", linewidths=0, antialiased=False)
     ax.add_collection(coll)

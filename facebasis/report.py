@@ -285,7 +285,9 @@ def penetration_figure(data: dict, out, formats=("png",)) -> list[Path]:
 
     ``data`` (as saved by the penetration study): ``faces`` (m, 3); for each expression name
     ``<name>/plain`` and ``<name>/ve`` vertex arrays and ``<name>/plain_hits``, ``<name>/ve_hits``
-    face index arrays; ``crops`` {zone: (view, ((x0, x1), (y0, y1)))}; ``names``.
+    face index arrays; ``crops`` {zone: (view, ((x0, x1), (y0, y1)))}; ``names``. Optional
+    ``<name>/plain_local_hits``, ``<name>/ve_local_hits``: triangles of local folds, drawn in orange
+    (``*_hits`` then holds the layer crossings, in red).
     """
     plt = _pyplot()
     out = Path(out)
@@ -299,10 +301,18 @@ def penetration_figure(data: dict, out, formats=("png",)) -> list[Path]:
             for kind in ("plain", "ve"):
                 hl = np.zeros(len(F), bool)
                 hl[np.asarray(data[f"{name}/{kind}_hits"], np.int64)] = True
+                local = data.get(f"{name}/{kind}_local_hits")
+                hl2 = None
+                if local is not None:
+                    hl2 = np.zeros(len(F), bool)
+                    hl2[np.asarray(local, np.int64)] = True
+                    hl2 &= ~hl
                 ax = axes[row, col]
-                draw_mesh(ax, data[f"{name}/{kind}"], F, view=view, crop=crop, highlight=hl)
+                draw_mesh(ax, data[f"{name}/{kind}"], F, view=view, crop=crop, highlight=hl, highlight2=hl2)
                 label = "plain transfer" if kind == "plain" else "virtual edges"
-                ax.set_title(f"{name}, {zone}: {label}\n{int(hl.sum())} triangles intersect", fontsize=7)
+                what = (f"{int(hl.sum())} triangles intersect" if hl2 is None else
+                        f"{int(hl.sum())} in layer crossings (red), {int(hl2.sum())} in local folds (orange)")
+                ax.set_title(f"{name}, {zone}: {label}\n{what}", fontsize=7)
                 col += 1
     fig.tight_layout()
     return save(fig, out / "penetration_closeups", formats)

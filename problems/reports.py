@@ -111,7 +111,8 @@ def _penetration(data: str, out: Path) -> list[Path]:
             counts.append((len(new), rep.count(local=False)))
             if name in show:
                 arrays[f"{name}/{kind}"] = X
-                arrays[f"{name}/{kind}_hits"] = np.unique(new.ravel())
+                arrays[f"{name}/{kind}_hits"] = np.unique(new[~rep.local].ravel())
+                arrays[f"{name}/{kind}_local_hits"] = np.unique(new[rep.local].ravel())
         rows.append((name, counts[0][0], counts[1][0], counts[0][1], counts[1][1]))
     total = tuple(sum(r[j] for r in rows) for j in range(1, 5))
     rows.append(("total",) + total)

@@ -378,3 +378,33 @@ def test_ict_detection_catches_lips_and_lids():
     E = ve.edges
     assert zones["lips"][E].all(1).sum() >= 100
     assert zones["lids"][E].all(1).sum() >= 20
+
+
+def test_penetration_figure_draws_layer_crossings_red_and_local_folds_orange(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from facebasis.render import HIGHLIGHT2_RGB, HIGHLIGHT_RGB, draw_mesh
+    from facebasis.report import penetration_figure
+
+    V, X, F, step = tucked_strip()
+    rep = penetration_report(X, F, references=[V], rest=V, local_within=4 * step)
+    local_tris = np.unique(rep.new[rep.local].ravel())
+    crossing = np.zeros(len(F), bool)
+    crossing[:2] = True
+    folds = np.zeros(len(F), bool)
+    folds[local_tris] = True
+    fig, ax = plt.subplots()
+    coll = draw_mesh(ax, X, F, view=(0.0, 0.0), highlight=crossing, highlight2=folds)
+    colors = coll.get_facecolors()[:, :3]
+    n_red = int(np.isclose(colors, HIGHLIGHT_RGB).all(1).sum())
+    n_orange = int(np.isclose(colors, HIGHLIGHT2_RGB).all(1).sum())
+    plt.close(fig)
+    assert n_red == 2 and n_orange == int((folds & ~crossing).sum()) > 0
+    data = {"faces": F, "names": ["tuck"], "crops": {"strip": ((0.0, 0.0), ((-1, 3), (-1, 3)))},
+            "tuck/plain": X, "tuck/ve": V, "tuck/plain_hits": np.zeros(0, np.int64),
+            "tuck/plain_local_hits": local_tris, "tuck/ve_hits": np.zeros(0, np.int64)}
+    paths = penetration_figure(data, tmp_path, formats=("png",))
+    assert [p.name for p in paths] == ["penetration_closeups.png"] and paths[0].stat().st_size > 0

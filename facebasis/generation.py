@@ -383,6 +383,11 @@ class BlendshapeGenerator:
                                                                                                   m_tri))  # (6, m_tri, k)
         self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
                                                              opts.sigma, opts.weight_measure))  # (m_tri, k)
+        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer:
+        # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
+        vc = self.dt.virtual_edge_cols(frame_deltas=dA)
+        self.virtual_rows = None if vc is None else np.ascontiguousarray(
+            vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         del dA
         B0 = problem.target_neutral
         T_frames = frames_cm(problem.examples, F)[:, :, :2] - self.dt.target_frames[:, :2]
@@ -399,11 +404,6 @@ class BlendshapeGenerator:
         # rows (a, 3k) with columns (coordinate, shape)
         av = self.dt.anchor_values()  # (k, a, 3)
         self.anchor_rows = np.ascontiguousarray(av.transpose(1, 2, 0)).reshape(av.shape[1], -1)
-        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer:
-        # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
-        vc = self.dt.virtual_edge_cols()
-        self.virtual_rows = None if vc is None else np.ascontiguousarray(
-            vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         self.precompute_seconds = time.perf_counter() - t0
 
     def reconstruct(self, rows) -> np.ndarray:

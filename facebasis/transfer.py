@@ -120,16 +120,18 @@ class DeformationTransfer:
         out = self.poisson.solve_frame_columns(cols, a_cols, extra_cols)
         return np.moveaxis(out.reshape(k, 3, -1), 1, 2)
 
-    def virtual_edge_cols(self, deltas: np.ndarray | None = None) -> np.ndarray | None:
+    def virtual_edge_cols(self, deltas: np.ndarray | None = None, frame_deltas=None) -> np.ndarray | None:
         """Targets of the virtual-edge rows for template shapes ``deltas`` (k, n, 3), laid out as
-        ``extra_cols`` (k*3, e) of :meth:`solve_frame_deltas`; None without virtual edges."""
+        ``extra_cols`` (k*3, e) of :meth:`solve_frame_deltas`; None without virtual edges.
+        ``frame_deltas`` (k, 3, 3, m): those shapes' ``A_i^S - A_0^S`` if already computed."""
         if self.virtual_edges is None or self.poisson.extra_rows is None:
             return None
         from .virtual_edges import virtual_edge_targets
 
         D = self.template.deltas if deltas is None else deltas
         T = virtual_edge_targets(self.virtual_edges, self.template.neutral, D, self.target_neutral,
-                                 self.template.faces, self.virtual_mode)  # (k, e, 3)
+                                 self.template.faces, self.virtual_mode, self.template_frames,
+                                 frame_deltas)  # (k, e, 3)
         return np.ascontiguousarray(np.moveaxis(T, 2, 1)).reshape(len(D) * 3, -1)
 
     def anchor_values(self, deltas: np.ndarray | None = None) -> np.ndarray:
@@ -144,8 +146,12 @@ class DeformationTransfer:
             raise InputError("transfer(): this transfer was built with extra rows; pass their targets to "
                              "solve_frame_deltas(..., extra_cols=...)")
         D = self.template.deltas[idx]
-        out = self.solve_frame_deltas(self.transferred_frame_deltas(D), self.anchor_values(D),
-                                      self.virtual_edge_cols(D))
+        dA = None
+        if self.virtual_edges is not None:  # the frames serve both the edge targets and the virtual edges
+            dA = frames_cm(self.template.neutral + D, self.template.faces)
+            dA -= self.template_frames
+        out = self.solve_frame_deltas(self.transferred_frame_deltas(D, frame_deltas=dA), self.anchor_values(D),
+                                      self.virtual_edge_cols(D, frame_deltas=dA))
         return Rig(self.target_neutral, self.template.faces,
                    tuple(self.template.names[i] for i in idx), out, source="deformation transfer")
 

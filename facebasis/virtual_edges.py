@@ -361,20 +361,25 @@ def detect_virtual_edges(V, F, cap: float | None = None, ratio: float = DEFAULT_
                         time.perf_counter() - t0, source=name)
 
 
-def vertex_gradients(neutral, shapes, F) -> np.ndarray:
+def vertex_gradients(neutral, shapes, F, neutral_frames=None, frame_deltas=None) -> np.ndarray:
     """Per-vertex mean deformation gradient minus identity, ``Q - I`` (k, n, 3, 3), of shapes (k, n, 3)
-    relative to ``neutral`` (Sumner-Popovic frames, averaged over each vertex's triangles)."""
+    relative to ``neutral`` (Sumner-Popovic frames, averaged over each vertex's triangles).
+
+    ``neutral_frames`` (3, 3, m) and ``frame_deltas`` (k, 3, 3, m), the frames of ``neutral`` and of
+    the shapes minus them (:func:`~facebasis.gradients.frames_cm`), may be passed when the caller
+    has them already; ``shapes`` is then not read.
+    """
     from .gradients import frames_cm
 
-    A0 = frames_cm(neutral, F)                       # (3, 3, m) component-major
+    A0 = frames_cm(neutral, F) if neutral_frames is None else neutral_frames  # (3, 3, m) component-major
     A0inv = np.linalg.inv(np.moveaxis(A0, -1, 0))    # (m, 3, 3)
-    dA = frames_cm(shapes, F) - A0                   # (k, 3, 3, m)
+    dA = frames_cm(shapes, F) - A0 if frame_deltas is None else frame_deltas  # (k, 3, 3, m)
     D = np.einsum("kabt,tbc->ktac", dA, A0inv)       # (Q - I) per triangle, (k, m, 3, 3)
     n, m = len(neutral), len(F)
     inc = sp.csr_matrix((np.ones(3 * m), (F.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
     deg = np.asarray(inc.sum(1)).ravel()
     inc = sp.diags(1.0 / np.maximum(deg, 1)) @ inc
-    k = len(shapes)
+    k = len(dA)
     flat = np.moveaxis(D, 1, -1).reshape(k * 9, m)   # (k*9, m)
     return np.moveaxis((inc @ flat.T).T.reshape(k, 3, 3, n), -1, 1)
 
@@ -383,7 +388,7 @@ VIRTUAL_MODES = ("proportional", "gradient")
 
 
 def virtual_edge_targets(edges: VirtualEdges, template_neutral, template_deltas, target_neutral, F,
-                         mode: str = "proportional") -> np.ndarray:
+                         mode: str = "proportional", template_frames=None, frame_deltas=None) -> np.ndarray:
     """Target deltas of every virtual edge for every shape, (k, e, 3): ``t_i - t``.
 
     ``mode="proportional"`` (default): ``t_i = Q t + c (s_i - Q s)`` with ``Q`` the mean gradient
@@ -403,6 +408,9 @@ def virtual_edge_targets(edges: VirtualEdges, template_neutral, template_deltas,
     by 0.50 of its motion (relative); proportional targets remove 14% and move it by 0.14. Counting
     only layer crossings (triangles >= 2 median edges apart along the target neutral,
     :func:`~facebasis.penetration.penetration_report` with ``rest``), they remove 83% and 31%.
+
+    ``template_frames``, ``frame_deltas``: the template's frames and its shapes' frame deltas, if the
+    caller has them (see :func:`vertex_gradients`).
     """
     if mode not in VIRTUAL_MODES:
         raise InputError(f"virtual edge mode: expected one of {VIRTUAL_MODES}, found {mode!r}")
@@ -411,7 +419,8 @@ def virtual_edge_targets(edges: VirtualEdges, template_neutral, template_deltas,
     if len(E) == 0:
         return np.zeros((k, 0, 3))
     S0 = np.asarray(template_neutral, float)
-    D = vertex_gradients(S0, S0 + template_deltas, F)     # (k, n, 3, 3)
+    D = vertex_gradients(S0, S0 + template_deltas if frame_deltas is None else None, F, template_frames,
+                         frame_deltas)                        # (k, n, 3, 3)
     Dm = 0.5 * (D[:, E[:, 0]] + D[:, E[:, 1]])             # (k, e, 3, 3)
     t = target_neutral[E[:, 1]] - target_neutral[E[:, 0]]  # (e, 3)
     Dt = np.einsum("keab,eb->kea", Dm, t)                  # (Q - I) t

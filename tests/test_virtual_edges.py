@@ -211,6 +211,25 @@ def test_proportional_virtual_edges_change_nothing_on_the_templates_own_neutral(
     assert np.abs(grad.deltas - rig.deltas).max() > 1e-3
 
 
+def test_virtual_edge_targets_from_precomputed_frames_are_the_same():
+    from facebasis.gradients import frames_cm
+
+    rig, target, _ = press_rig(gap=0.4)
+    F = rig.faces
+    ve = detect_virtual_edges(rig.neutral, F, cap=1.2)
+    A0 = frames_cm(rig.neutral, F)
+    dA = frames_cm(rig.neutral + rig.deltas, F) - A0
+    for mode in ("proportional", "gradient"):
+        fresh = virtual_edge_targets(ve, rig.neutral, rig.deltas, target, F, mode)
+        assert np.array_equal(virtual_edge_targets(ve, rig.neutral, rig.deltas, target, F, mode, A0, dA), fresh)
+        assert np.array_equal(virtual_edge_targets(ve, rig.neutral, rig.deltas, target, F, mode, A0), fresh)
+        # transfer() computes the frames once for both the edge targets and the virtual edges
+        dt = DeformationTransfer(rig, target, virtual_edges=ve, virtual_mode=mode)
+        cols = np.ascontiguousarray(np.moveaxis(fresh, 2, 1)).reshape(3 * len(rig.deltas), -1)
+        manual = dt.solve_frame_deltas(dt.transferred_frame_deltas(), dt.anchor_values(), cols)
+        assert np.array_equal(dt.transfer().deltas, manual)
+
+
 def test_transfer_rejects_mismatched_virtual_edges():
     rig, target, _ = press_rig(gap=0.4)
     Vf, Ff = grid_sheet(12, 12, size=3.0)

@@ -142,31 +142,17 @@ def cmd_virtual_edges(args) -> int:
 
 
 def cmd_penetration(args) -> int:
-    from .meshio import read_mesh
-    from .mesh import same_topology
+    from .meshio import read_mesh, read_mesh_like
     from .penetration import parse_region, penetration_report, region_faces
 
     V, F = read_mesh(args.mesh)
-    refs = []
-    for r in args.reference:
-        R, FR = read_mesh(r)
-        if len(R) != len(V):
-            from .errors import TopologyError
-
-            raise TopologyError(f"{r}: expected {len(V)} vertices as in {args.mesh}, found {len(R)}")
-        same_topology(F, FR, str(args.mesh), str(r))
-        refs.append(R)
+    refs = [read_mesh_like(r, len(V), F, str(args.mesh)) for r in args.reference]
     face_mask = region_faces(F, parse_region(args.region, len(V))) if args.region else None
     rest, within = None, None
     if args.rest is not None:
         from .virtual_edges import median_edge_length
 
-        rest, FR = read_mesh(args.rest)
-        if len(rest) != len(V):
-            from .errors import TopologyError
-
-            raise TopologyError(f"{args.rest}: expected {len(V)} vertices as in {args.mesh}, found {len(rest)}")
-        same_topology(F, FR, str(args.mesh), str(args.rest))
+        rest = read_mesh_like(args.rest, len(V), F, str(args.mesh))
         if not (args.local_within > 0):
             from .errors import InputError
 
@@ -253,6 +239,8 @@ def cmd_demo(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .penetration import LOCAL_FOLD_EDGES
+
     parser = argparse.ArgumentParser(prog="facebasis", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -301,8 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--region", default=None, metavar="START:END", help="only triangles with all vertices in START..END-1")
     p.add_argument("--rest", default=None, metavar="REST",
                    help="rest mesh (e.g. the target neutral): split the pairs into local folds and layer crossings")
-    p.add_argument("--local-within", type=float, default=2.0, metavar="K",
-                   help="with --rest: triangles closer than K median edge lengths along REST are a local fold (default 2)")
+    p.add_argument("--local-within", type=float, default=LOCAL_FOLD_EDGES, metavar="K",
+                   help="with --rest: triangles closer than K median edge lengths along REST are a local fold "
+                        f"(default {LOCAL_FOLD_EDGES:g})")
     p.add_argument("--show", type=int, default=10, help="list this many pairs (default 10)")
     p.set_defaults(func=cmd_penetration)
 

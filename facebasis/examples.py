@@ -12,9 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, RigError, TopologyError
-from .mesh import same_topology
-from .meshio import MESH_SUFFIXES, read_mesh
+from .errors import InputError, RigError
+from .meshio import MESH_SUFFIXES, read_mesh_like
 from .rig import Rig
 
 
@@ -28,10 +27,7 @@ def load_examples(folder: str | os.PathLike, template: Rig) -> tuple[tuple[str, 
         raise InputError(f"examples folder {folder}: expected .obj/.ply training expressions, found none")
     names, meshes = [], []
     for p in files:
-        V, F = read_mesh(p)
-        if len(V) != template.n_vertices:
-            raise TopologyError(f"{p}: expected {template.n_vertices} vertices as in template {template.source}, found {len(V)}")
-        same_topology(template.faces, F, str(p), f"template {template.source}")
+        V = read_mesh_like(p, template.n_vertices, template.faces, f"template {template.source}")
         names.append(p.stem)
         meshes.append(V)
     dup = sorted({n for n in names if names.count(n) > 1})

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write_bytes
-from .errors import MeshError
-from .mesh import validate_mesh
+from .errors import MeshError, TopologyError
+from .mesh import same_topology, validate_mesh
 
 MESH_SUFFIXES = (".obj", ".ply")
 
@@ -80,6 +80,21 @@ def read_mesh(path: str | os.PathLike, *, check_degenerate: bool = False) -> tup
                 "loading (the file references vertices that do not exist or the loader reordered them)"
             )
     return validate_mesh(V, F, name, check_degenerate=check_degenerate)
+
+
+def read_mesh_like(path: str | os.PathLike, n_vertices: int, F_ref: np.ndarray, ref_name: str, *,
+                   check_degenerate: bool = False) -> np.ndarray:
+    """Read a mesh that must have the topology of a reference (``n_vertices`` vertices, faces
+    ``F_ref`` in the same order); returns its vertices (n, 3).
+
+    Raises :class:`TopologyError` naming ``path`` and ``ref_name`` with the expected and found
+    vertex count, or the first differing face (:func:`~facebasis.mesh.same_topology`).
+    """
+    V, F = read_mesh(path, check_degenerate=check_degenerate)
+    if len(V) != n_vertices:
+        raise TopologyError(f"{path}: expected {n_vertices} vertices as in {ref_name}, found {len(V)}")
+    same_topology(F_ref, F, str(path), ref_name)
+    return V
 
 
 def mesh_bytes(V: np.ndarray, F: np.ndarray, suffix: str = ".obj") -> bytes:

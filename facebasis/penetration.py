@@ -283,6 +283,10 @@ def pair_set(V, F, face_mask=None, name: str = "reference") -> set:
     return set(map(tuple, intersecting_pairs(V, F, face_mask, name=name).tolist()))
 
 
+#: default radius of a local fold, in median edge lengths of the rest surface (``local_within``)
+LOCAL_FOLD_EDGES = 2.0
+
+
 def triangle_surface_distance(V, F, pairs, limit: float) -> np.ndarray:
     """Graph geodesic distance along the surface (V, F) between two triangles, (p,).
 
@@ -332,14 +336,10 @@ def penetration_report(V, F, references=(), face_mask=None, zones=None, referenc
     if zones is not None:
         names = tuple(zones) + ("elsewhere",)
         zone_index = np.full(len(new), len(names) - 1, dtype=np.int64)
-        left = np.ones(len(new), bool)
-        for z, (zname, mask) in enumerate(zones.items()):
-            m = np.asarray(mask, bool)
-            inz = left & (m[F[new[:, 0]]].any(1) | m[F[new[:, 1]]].any(1))
-            counts[zname] = int(inz.sum())
-            zone_index[inz] = z
-            left &= ~inz
-        counts["elsewhere"] = int(left.sum())
+        for z in reversed(range(len(zones))):  # a pair belongs to the first zone that holds it
+            m = np.asarray(zones[names[z]], bool)
+            zone_index[m[F[new[:, 0]]].any(1) | m[F[new[:, 1]]].any(1)] = z
+        counts = dict(zip(names, np.bincount(zone_index, minlength=len(names)).tolist()))
     local = None
     if rest is not None:
         local = triangle_surface_distance(rest, F, new, float(local_within)) < local_within
@@ -348,4 +348,4 @@ def penetration_report(V, F, references=(), face_mask=None, zones=None, referenc
 
 __all__ = ["orient3d", "triangle_pairs_intersect", "candidate_triangle_pairs", "intersecting_pairs",
            "region_faces", "parse_region", "PenetrationReport", "penetration_report", "pair_set",
-           "triangle_surface_distance"]
+           "triangle_surface_distance", "LOCAL_FOLD_EDGES"]

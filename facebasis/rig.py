@@ -18,8 +18,8 @@ import numpy as np
 
 from .atomic import atomic_directory
 from .errors import RigError, TopologyError
-from .meshio import MESH_SUFFIXES, read_mesh, write_mesh
-from .mesh import same_topology, validate_mesh, validate_vertices
+from .meshio import MESH_SUFFIXES, read_mesh, read_mesh_like, write_mesh
+from .mesh import validate_mesh, validate_vertices
 
 
 @dataclass(frozen=True)
@@ -139,10 +139,7 @@ def load_rig_folder(
     for p in _mesh_files(folder, exclude):
         if p.resolve() == neutral_path.resolve():
             continue
-        V, F = read_mesh(p)
-        if len(V) != len(V0):
-            raise TopologyError(f"{p}: expected {len(V0)} vertices as in {neutral_path}, found {len(V)}")
-        same_topology(F0, F, str(p), str(neutral_path))
+        V = read_mesh_like(p, len(V0), F0, str(neutral_path))
         names.append(p.stem)
         deltas.append(V - V0)
     if not names:
@@ -166,10 +163,6 @@ def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj"
 
 def load_target_neutral(path: str | os.PathLike, template: Rig) -> np.ndarray:
     """Read a target neutral and check it matches the template's topology."""
-    V, F = read_mesh(path, check_degenerate=True)
-    if len(V) != template.n_vertices:
-        raise TopologyError(
-            f"{path}: expected {template.n_vertices} vertices as in template {template.source}, found {len(V)}"
-        )
-    same_topology(template.faces, F, str(path), f"template {template.source}")
+    V = read_mesh_like(path, template.n_vertices, template.faces, f"template {template.source}",
+                       check_degenerate=True)
     return validate_vertices(V, str(path))

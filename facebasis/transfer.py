@@ -146,10 +146,8 @@ class DeformationTransfer:
             raise InputError("transfer(): this transfer was built with extra rows; pass their targets to "
                              "solve_frame_deltas(..., extra_cols=...)")
         D = self.template.deltas[idx]
-        dA = None
-        if self.virtual_edges is not None:  # the frames serve both the edge targets and the virtual edges
-            dA = frames_cm(self.template.neutral + D, self.template.faces)
-            dA -= self.template_frames
+        dA = frames_cm(self.template.neutral + D, self.template.faces)  # A_i^S - A_0^S, once for both uses
+        dA -= self.template_frames
         out = self.solve_frame_deltas(self.transferred_frame_deltas(D, frame_deltas=dA), self.anchor_values(D),
                                       self.virtual_edge_cols(D, frame_deltas=dA))
         return Rig(self.target_neutral, self.template.faces,

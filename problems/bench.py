@@ -162,7 +162,7 @@ def bench_virtual(repeat: int) -> dict:
     transferred onto a target outside the identity space (identity seed 0 scaled 3x)."""
     import numpy as np
 
-    from facebasis.penetration import pair_set, penetration_report
+    from facebasis.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
     from facebasis.transfer import DeformationTransfer
     from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
     from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
@@ -189,7 +189,7 @@ def bench_virtual(repeat: int) -> dict:
     template_pairs = [pair_set(rig.neutral + d, F) for d in rig.deltas]
     lips_lids = {"lips": zones["lips"], "lids": zones["lids"]}
 
-    local_within = 2.0 * median_edge_length(B0, F)
+    local_within = LOCAL_FOLD_EDGES * median_edge_length(B0, F)
 
     def new_pairs(result):  # per expression: new pairs (all, lips, lids), then layer crossings only (same)
         out = []
@@ -207,10 +207,10 @@ def bench_virtual(repeat: int) -> dict:
           "not in the target neutral nor in the template shape (same triangles)")
     print(f"  plain transfer ({t_plain:.2f} s): {base[:, 0].sum()} new pairs over {rig.n_shapes} expressions "
           f"(lips {base[:, 1].sum()}, lids {base[:, 2].sum()}, elsewhere {base[:, 0].sum() - base[:, 1].sum() - base[:, 2].sum()})")
-    print(f"    of which layer crossings (triangles >= 2 median edges = {local_within:.3f} cm apart along the target "
+    print(f"    of which layer crossings (triangles >= {LOCAL_FOLD_EDGES:g} median edges = {local_within:.3f} cm apart along the target "
           f"neutral): {base[:, 3].sum()} (lips {base[:, 4].sum()}, lids {base[:, 5].sum()}); local folds "
           f"{base[:, 0].sum() - base[:, 3].sum()}")
-    results = {}
+    results, counts = {}, {}
     outside = ~layered
     for label, ve, mode, w in (("gradient, w 1", ve_all, "gradient", 1.0), ("gradient, w 3", ve_all, "gradient", 3.0),
                                ("gradient, w 1, lips+lids mask", ve_mask, "gradient", 1.0),
@@ -223,7 +223,7 @@ def bench_virtual(repeat: int) -> dict:
         motion = np.linalg.norm(plain.deltas, axis=2)
         rel_out = np.linalg.norm(diff[:, outside]) / np.linalg.norm(motion[:, outside])
         red = 1.0 - cnt[:, 0].sum() / max(1, base[:, 0].sum())
-        results[label] = red
+        results[label], counts[label] = red, cnt
         print(f"  {label:31s} ({secs:.2f} s): {cnt[:, 0].sum():5d} new pairs (lips {cnt[:, 1].sum()}, lids "
               f"{cnt[:, 2].sum()}), {100 * red:5.1f}% fewer than plain [target >= 90%, none at the lids]; away from lips "
               f"and lids: max difference to plain {diff[:, outside].max():.3f} cm, relative {rel_out:.3f}")
@@ -232,9 +232,7 @@ def bench_virtual(repeat: int) -> dict:
               f"fewer than plain; local folds {cnt[:, 0].sum() - cnt[:, 3].sum()}")
     best = max(results, key=results.get)
     print("  per expression, plain -> " + best + " (largest 12 by plain count):")
-    ve, mode, w = (ve_mask, "gradient", 1.0) if "mask" in best else (ve_all, best.split(",")[0],
-                                                                      float(best.split("w ")[1].split(",")[0]))
-    cnt = new_pairs(DeformationTransfer(rig, B0, virtual_edges=ve, virtual_weight=w, virtual_mode=mode).transfer())
+    cnt = counts[best]
     order = np.argsort(-base[:, 0])[:12]
     print("    " + ", ".join(f"{rig.names[i]} {base[i, 0]}->{cnt[i, 0]}" for i in order))
     order = np.argsort(-cnt[:, 3])[:8]

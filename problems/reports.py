@@ -71,7 +71,7 @@ def _crop(V, mask, view="front", pad=0.25):
 def _penetration(data: str, out: Path) -> list[Path]:
     """Plain transfer vs virtual edges on a target with thinner / reshaped layers; counts per
     expression (table) and close-ups (figure)."""
-    from facebasis.penetration import pair_set, penetration_report
+    from facebasis.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
     from facebasis.report import penetration_figure, write_table
     from facebasis.transfer import DeformationTransfer
     from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
@@ -99,7 +99,7 @@ def _penetration(data: str, out: Path) -> list[Path]:
     plain = DeformationTransfer(template, target).transfer()
     guarded = DeformationTransfer(template, target, virtual_edges=ve).transfer()
     neutral_pairs = pair_set(target, F)
-    local_within = 2.0 * median_edge_length(target, F)  # closer along the target neutral: a local fold
+    local_within = LOCAL_FOLD_EDGES * median_edge_length(target, F)  # closer along the target neutral: a local fold
     rows, arrays = [], {"faces": F}
     for i, name in enumerate(template.names):
         refs = (neutral_pairs, pair_set(template.neutral + template.deltas[i], F))
@@ -122,7 +122,7 @@ def _penetration(data: str, out: Path) -> list[Path]:
     arrays["crops"] = {"lips": _crop(template.neutral, zones["lips"]), "lids": _crop(template.neutral, zones["lids"])}
     paths += penetration_figure(arrays, out)
     print(f"  penetration ({label}): {total[0]} new intersecting pairs with plain transfer, {total[1]} with "
-          f"virtual edges ({len(ve)} edges); layer crossings (triangles >= 2 median edges apart along the target "
+          f"virtual edges ({len(ve)} edges); layer crossings (triangles >= {LOCAL_FOLD_EDGES:g} median edges apart along the target "
           f"neutral) {total[2]} and {total[3]}")
     return paths
 

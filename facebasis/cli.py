@@ -79,6 +79,14 @@ def _pair_of_floats(text: str, name: str) -> tuple[float, float]:
     return vals[0], vals[1]
 
 
+def _describe_pairs(pairs, given: int) -> str:
+    """``"3 exclusive pairs: a:b, c:d, e:f"`` (and how many repeats of a pair were merged)."""
+    text = f"{len(pairs)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in pairs) if pairs else "")
+    if given > len(pairs):
+        text += f" ({given - len(pairs)} repeated pair(s) merged)"
+    return text
+
+
 def cmd_rig(args) -> int:
     from .atomic import atomic_directory
     from .examples import load_examples, load_weights, parse_pairs
@@ -95,9 +103,10 @@ def cmd_rig(args) -> int:
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
     ve = _virtual_edges_for(args, template)
-    problem = GenerationProblem(template, target, examples, X0, names, parse_pairs(args.exclusive), ve)
+    pairs = parse_pairs(args.exclusive)
+    problem = GenerationProblem(template, target, examples, X0, names, pairs, ve)
     print(f"template {template.n_shapes} shapes, {template.n_vertices} vertices; {len(names)} training "
-          f"expressions; {len(problem.exclusive)} exclusive pairs")
+          f"expressions; {_describe_pairs(problem.exclusive, len(args.exclusive))}")
     gen = BlendshapeGenerator(problem, options)
 
     def progress(rec, total):
@@ -175,11 +184,25 @@ def cmd_penetration(args) -> int:
 def cmd_verify(args) -> int:
     from .verify import verify_run
 
-    report = verify_run(args.run_dir, tolerance=args.tolerance)
+    from .examples import parse_pairs
+
+    report = verify_run(args.run_dir, tolerance=args.tolerance, check_pairs=parse_pairs(args.exclusive))
     print(f"{report.run_dir}: {len(report.examples)} examples, lambda {report.lam:g}, tolerance {report.tolerance:g} "
           "(relative objective gap of the stored weights to the certified global optimum)")
+    print(f"exclusive pairs of the run: {_describe_pairs(report.pairs, len(report.pairs))}")
     print(report.table())
     bad = [e.name for e in report.examples if not e.ok]
+    if report.checked:
+        print("pairs named with --exclusive (largest |x_a x_b| of the stored weights over all examples):")
+        for chk in report.checked:
+            flag = "ok" if chk.ok else "BREACHED"
+            print(f"  {chk.a}:{chk.b}  {chk.max_product:.3g}  at {chk.worst_example}  "
+                  f"({'a constraint of the run' if chk.in_run else 'not a constraint of the run'})  {flag}")
+        breached = [f"{c.a}:{c.b}" for c in report.checked if not c.ok]
+        if breached:
+            print(f"NOT EXCLUSIVE: the stored weights breach {len(breached)} pair(s) named with --exclusive "
+                  f"({', '.join(breached)})", file=sys.stderr)
+            return 1
     if bad:
         print(f"NOT OPTIMAL: {len(bad)} of {len(report.examples)} stored answers ({', '.join(bad)})", file=sys.stderr)
         return 1
@@ -265,8 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=int, default=10, help="alternations (default 10)")
     p.add_argument("--alpha", default="0.5,0.1", help="alpha schedule FIRST,LAST (default 0.5,0.1)")
     p.add_argument("--lambda", dest="lam", default="100,10", help="lambda schedule FIRST,LAST (default 100,10)")
-    p.add_argument("--exclusive", nargs="*", default=[], metavar="SHAPE_A:SHAPE_B",
-                   help="mutually exclusive shape pairs (complementarity x_a x_b = 0)")
+    p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
+                   help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
+                        "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")
     _add_virtual_edge_args(p)
     p.set_defaults(func=cmd_rig)
 
@@ -323,6 +347,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run_dir", help="output folder of `facebasis rig` (with inputs.json)")
     p.add_argument("--tolerance", type=float, default=1e-6,
                    help="largest relative objective gap accepted (default 1e-6); exit status 1 beyond it")
+    p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
+                   help="also report the largest product x_a x_b of the stored weights over these pairs "
+                        "(several after one flag or repeated); exit status 1 if any exceeds 1e-8")
     p.set_defaults(func=cmd_verify)
     return parser
 

@@ -83,11 +83,19 @@ def weights_to_json(X: np.ndarray, example_names, shape_names, drop_zero: bool =
 
 
 def parse_pairs(specs) -> tuple[tuple[str, str], ...]:
-    """``["mouthLeft:mouthRight", ...]`` -> pairs of names."""
-    pairs = []
+    """``["mouthLeft:mouthRight", ...]`` -> pairs of names, in the order given.
+
+    Every pair is kept; only an exact repeat of a pair (``A:B`` twice, or ``A:B`` and ``B:A``,
+    the same constraint) is merged into its first occurrence."""
+    pairs, seen = [], set()
     for spec in specs or ():
         parts = str(spec).split(":")
-        if len(parts) != 2 or not all(parts):
+        if len(parts) != 2 or not all(p.strip() for p in parts):
             raise InputError(f"--exclusive: expected SHAPE_A:SHAPE_B, found {spec!r}")
-        pairs.append((parts[0], parts[1]))
+        a, b = parts[0].strip(), parts[1].strip()
+        key = frozenset((a, b))
+        if key in seen:
+            continue
+        seen.add(key)
+        pairs.append((a, b))
     return tuple(pairs)

@@ -41,15 +41,29 @@ class ExampleVerdict:
 
 
 @dataclass(frozen=True)
+class PairCheck:
+    """The largest complementarity product ``max_j |x_ja x_jb|`` of the stored weights over one pair
+    the user named at verify time, whether or not the run was solved with it."""
+    a: str
+    b: str
+    max_product: float
+    worst_example: str
+    in_run: bool               # the run's own inputs.json lists this pair
+    ok: bool                   # max_product <= the residual tolerance
+
+
+@dataclass(frozen=True)
 class VerifyReport:
     run_dir: str
     lam: float
     tolerance: float
     examples: tuple[ExampleVerdict, ...]
+    pairs: tuple[tuple[str, str], ...] = ()       # the exclusive pairs the run was solved with
+    checked: tuple[PairCheck, ...] = ()           # pairs named at verify time
 
     @property
     def ok(self) -> bool:
-        return all(e.ok for e in self.examples)
+        return all(e.ok for e in self.examples) and all(c.ok for c in self.checked)
 
     def table(self) -> str:
         head = f"{'example':16s} {'stored':>14s} {'certified':>14s} {'rel. gap':>10s} {'max|xa xb|':>10s} " \
@@ -79,8 +93,13 @@ def write_inputs(stage: Path, examples_dir, weights_file, exclusive, final_lambd
                                             "final_lambda": float(final_lambda)})
 
 
-def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-8) -> VerifyReport:
-    """Certify the stored weights of a ``facebasis rig`` output folder (see module docstring)."""
+def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-8,
+               check_pairs=()) -> VerifyReport:
+    """Certify the stored weights of a ``facebasis rig`` output folder (see module docstring).
+
+    ``check_pairs``: extra ``(shape_a, shape_b)`` pairs; for each, the report gives the largest
+    product ``|x_a x_b|`` of the stored weights over all examples (:class:`PairCheck`), so a user
+    can confirm that a constraint they meant to impose holds, whatever the run recorded."""
     from .examples import load_examples, load_weights, parse_pairs
     from .rig import load_rig_folder
 
@@ -101,8 +120,14 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     names, T = load_examples(examples_dir, rig)
     prior = load_weights(weights_file, names, rig.names)
     stored = load_weights(run / "weights.json", names, rig.names)
-    pairs = np.array([rig.index([a, b]) for a, b in parse_pairs([f"{a}:{b}" for a, b in exclusive])],
+    run_pairs = parse_pairs([f"{a}:{b}" for a, b in exclusive])
+    pairs = np.array([rig.index([a, b], what=f"{path}: exclusive pair {a}:{b}") for a, b in run_pairs],
                      dtype=np.int64).reshape(-1, 2)
+    extra = tuple((str(a), str(b)) for a, b in check_pairs)
+    for a, b in extra:
+        rig.index([a, b], what=f"--exclusive {a}:{b}")
+        if a == b:
+            raise InputError(f"--exclusive {a}:{b}: expected two different shapes, found one twice")
     B = rig.deltas.reshape(rig.n_shapes, -1)
     targets = (T - rig.neutral).reshape(len(T), -1)
     G = B @ B.T
@@ -119,7 +144,15 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
         gap = (f - cs.objective) / max(1.0, abs(cs.objective))
         ok = gap <= tolerance and comp <= residual_tolerance and bound <= residual_tolerance
         out.append(ExampleVerdict(name, f, cs.objective, gap, comp, bound, cs.nodes, ok))
-    return VerifyReport(str(run), lam, tolerance, tuple(out))
+    checked = []
+    run_keys = {frozenset(p) for p in run_pairs}
+    for a, b in extra:
+        ia, ib = rig.index([a, b])
+        prod = np.abs(stored[:, ia] * stored[:, ib])
+        worst = int(np.argmax(prod))
+        checked.append(PairCheck(a, b, float(prod[worst]), names[worst], frozenset((a, b)) in run_keys,
+                                 bool(prod[worst] <= residual_tolerance)))
+    return VerifyReport(str(run), lam, tolerance, tuple(out), run_pairs, tuple(checked))
 
 
-__all__ = ["ExampleVerdict", "VerifyReport", "verify_run", "write_inputs", "INPUTS_FILE"]
+__all__ = ["ExampleVerdict", "PairCheck", "VerifyReport", "verify_run", "write_inputs", "INPUTS_FILE"]

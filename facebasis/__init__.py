@@ -1,24 +1,23 @@
-"""facebasis: personalised facial blendshape rigs.
+"""facebasis: personalised facial blendshape rigs, kept free of layer penetration, driven from video.
 
-Core pieces (pure functions over numpy arrays, stateful solvers for repeated solves):
+One sub-package per method over a shared geometry core; imports run downward only
+(``tests/test_layout.py`` keeps it so):
 
-* :mod:`facebasis.gradients` - triangle frames, deformation gradients, the edge operator
-* :mod:`facebasis.poisson` - factor-once reconstruction of vertices from edges
-* :mod:`facebasis.transfer` - deformation transfer (Sumner & Popovic 2004)
-* :mod:`facebasis.rig`, :mod:`facebasis.meshio` - rigs, rig folders, OBJ/PLY
-* :mod:`facebasis.generation`, :mod:`facebasis.weights` - example-based generation (seed 000)
-* :mod:`facebasis.certify`, :mod:`facebasis.formulations`, :mod:`facebasis.verify` - certified
-  optima of the weight step and the IPOPT formulations compared against them
-* :mod:`facebasis.virtual_edges`, :mod:`facebasis.penetration` - virtual edges (seed 004) and the
-  exact count of intersecting triangle pairs
-* :mod:`facebasis.studies`, :mod:`facebasis.report`, :mod:`facebasis.export` - Dask studies,
-  paper-style figures from stored results, glTF export
-* :mod:`facebasis.default_face` - the generated built-in face
+* :mod:`facebasis.geometry` - meshes and files, triangle frames, factor-once reconstruction,
+  deformation transfer, the :class:`Rig` type, glTF
+* :mod:`facebasis.contact` - virtual edges against layer penetration and the exact counter
+  (Li, Shen, Liu, Chinese Journal of Computers 2023)
+* :mod:`facebasis.rigging` - example-based blendshape generation with certified weights
+  (Gao, Tan, Guo, Fan, Computer Engineering 2015)
+* :mod:`facebasis.report` - studies, figures and tables that only read results
+* :mod:`facebasis.defaults` - the generated built-in face and the demo
+* :mod:`facebasis.cli` - the thin command line
+* :mod:`facebasis.errors`, :mod:`facebasis.atomic` - the exception hierarchy and atomic outputs
 """
 
 from .errors import FacebasisError, InputError, MeshError, RigError, SolverError, TopologyError
-from .rig import Rig, load_rig_folder, write_rig_folder
-from .transfer import DeformationTransfer, deformation_transfer
+from .geometry.rig import Rig, load_rig_folder, write_rig_folder
+from .geometry.transfer import DeformationTransfer, deformation_transfer
 
 __version__ = "0.1.0"
 

@@ -39,7 +39,7 @@ def _machine():
 def bench_transfer(repeat: int) -> dict:
     import numpy as np
 
-    from facebasis.transfer import DeformationTransfer
+    from facebasis.geometry.transfer import DeformationTransfer
     from problems.ict import ict_random_identity, ict_rig
 
     rig = ict_rig()
@@ -64,9 +64,9 @@ def bench_rig(repeat: int) -> dict:
 
     import numpy as np
 
-    from facebasis.generation import GenerationOptions, generate_blendshapes, reproduction_error
-    from facebasis.transfer import deformation_transfer
-    from facebasis.weights import WeightSolver
+    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+    from facebasis.geometry.transfer import deformation_transfer
+    from facebasis.rigging.weights import WeightSolver
     from problems.generation import ict_person_problem
 
     pp = ict_person_problem(seed=0)
@@ -127,7 +127,7 @@ def bench_weights(repeat: int) -> dict:
     """The weight-problem suite: certified solver timing and the IPOPT formulation comparison."""
     import numpy as np
 
-    from facebasis.formulations import compare_formulations, summarise_comparison
+    from facebasis.rigging.formulations import compare_formulations, summarise_comparison
     from problems.weights_suite import weight_suite
 
     suite = weight_suite("ict")
@@ -162,9 +162,10 @@ def bench_virtual(repeat: int) -> dict:
     transferred onto a target outside the identity space (identity seed 0 scaled 3x)."""
     import numpy as np
 
-    from facebasis.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
-    from facebasis.transfer import DeformationTransfer
-    from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
+    from facebasis.contact.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
+    from facebasis.geometry.transfer import DeformationTransfer
+    from facebasis.contact.virtual_edges import detect_virtual_edges
+    from facebasis.geometry.mesh import median_edge_length
     from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
 
     rig = ict_rig()

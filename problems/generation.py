@@ -1,6 +1,6 @@
 """Example-based generation problems on the ICT data with a known person-specific ground truth.
 
-The construction is :mod:`facebasis.synthetic`'s; ``ict_person_problem`` builds, from the ICT data
+The construction is :mod:`facebasis.rigging.synthetic`'s; ``ict_person_problem`` builds, from the ICT data
 (``../shared``):
 
 * a target identity ``B_0`` (seeded identity weights);
@@ -16,7 +16,7 @@ The construction is :mod:`facebasis.synthetic`'s; ``ict_person_problem`` builds,
 
 from __future__ import annotations
 
-from facebasis.synthetic import PersonProblem, default_face_problem, make_person_problem, personalise  # noqa: F401
+from facebasis.rigging.synthetic import PersonProblem, default_face_problem, make_person_problem, personalise  # noqa: F401
 
 ICT_EXCLUSIVE = (
     ("mouthLeft", "mouthRight"), ("jawLeft", "jawRight"), ("eyeLookIn_L", "eyeLookOut_L"),
@@ -31,7 +31,7 @@ ICT_COUPLINGS = (("mouthSmile_L", "cheekSquint_L", 0.4), ("mouthSmile_R", "cheek
 
 
 def ict_person_problem(seed: int = 0, n_train: int = 20, n_heldout: int = 20, noise: float = 0.3) -> PersonProblem:
-    from facebasis.transfer import deformation_transfer
+    from facebasis.geometry.transfer import deformation_transfer
     from problems.ict import ict_random_identity, ict_rig
 
     template = ict_rig()

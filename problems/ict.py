@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from facebasis.errors import InputError
-from facebasis.rig import Rig
+from facebasis.geometry.rig import Rig
 
 REPO = Path(__file__).resolve().parent.parent
 

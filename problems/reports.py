@@ -3,7 +3,7 @@
 Runs, from scratch, into ``reports/<data>/``:
 
 * the studies (alpha, lambda, alpha x lambda, initial-weight noise, method comparison) on Dask
-  -> ``results.csv`` and its figures/tables (:func:`facebasis.report.sweep_report`);
+  -> ``results.csv`` and its figures/tables (:func:`facebasis.report.run_report.sweep_report`);
 * one example-based run written like ``facebasis rig`` -> ``run/`` and its report (convergence,
   weights, residuals, shapes) and ``run/rig.glb``; per-vertex error maps against the person's true
   shapes from three views (``error_maps_*``);
@@ -29,8 +29,8 @@ REPO = Path(__file__).resolve().parent.parent
 
 def _run_folder(pp, out: Path):
     """An example-based run written as `facebasis rig` writes it, with its inputs as files."""
-    from facebasis.generation import GenerationOptions, generate_blendshapes
-    from facebasis.results import write_problem_inputs, write_rig_run
+    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.runs import write_problem_inputs, write_rig_run
 
     p = pp.problem
     options = GenerationOptions()
@@ -46,8 +46,8 @@ def _run_folder(pp, out: Path):
 def _error_maps(pp, generated, out: Path, data: str) -> list[Path]:
     """Per-vertex error against the person's true shapes, deformation transfer vs the generated rig,
     from three views (renders of the built-in face only; ICT faces are not rendered into the repo)."""
-    from facebasis.figures import shape_error_grid
-    from facebasis.transfer import deformation_transfer
+    from facebasis.report.figures import shape_error_grid
+    from facebasis.geometry.transfer import deformation_transfer
 
     p = pp.problem
     dt = deformation_transfer(p.template, p.target_neutral)
@@ -60,7 +60,7 @@ def _error_maps(pp, generated, out: Path, data: str) -> list[Path]:
 
 
 def _crop(V, mask, view="front", pad=0.25):
-    from facebasis.render import project
+    from facebasis.report.render import project
 
     P = project(V[mask], view)
     lo, hi = P[:, :2].min(0), P[:, :2].max(0)
@@ -71,10 +71,11 @@ def _crop(V, mask, view="front", pad=0.25):
 def _penetration(data: str, out: Path) -> list[Path]:
     """Plain transfer vs virtual edges on a target with thinner / reshaped layers; counts per
     expression (table) and close-ups (figure)."""
-    from facebasis.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
-    from facebasis.report import penetration_figure, write_table
-    from facebasis.transfer import DeformationTransfer
-    from facebasis.virtual_edges import detect_virtual_edges, median_edge_length
+    from facebasis.contact.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
+    from facebasis.report.run_report import penetration_figure, write_table
+    from facebasis.geometry.transfer import DeformationTransfer
+    from facebasis.contact.virtual_edges import detect_virtual_edges
+    from facebasis.geometry.mesh import median_edge_length
 
     if data == "ict":
         from problems.ict import ict_identity, ict_random_identity, ict_rig, ict_zones
@@ -86,7 +87,7 @@ def _penetration(data: str, out: Path) -> list[Path]:
         show = ("mouthClose", "jawForward", "mouthShrugLower", "eyeBlink_L")
         label = "ICT onto identity seed 0 scaled 3x"
     else:
-        from facebasis.default_face import default_person, default_template, region_masks
+        from facebasis.defaults.face import default_person, default_template, region_masks
 
         template = default_template()
         target = default_person().neutral
@@ -144,8 +145,8 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else REPO / "reports" / args.data
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    from facebasis.report import formulation_report, report_run, sweep_report
-    from facebasis.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
+    from facebasis.report.run_report import formulation_report, report_run, sweep_report
+    from facebasis.report.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
 
     seeds = tuple(int(s) for s in args.seeds.split(","))
     tasks = [t for st in STUDIES for t in study_tasks(st, args.data, seeds)]
@@ -159,7 +160,7 @@ def main(argv=None) -> int:
     report_run(run, out / "run_report")
     _error_maps(pp, generated, out, args.data)
     print("formulations: weight-step suite")
-    from facebasis.formulations import compare_formulations
+    from facebasis.rigging.formulations import compare_formulations
     from problems.weights_suite import weight_suite
 
     formulation_report(compare_formulations(weight_suite(args.data)), out)

@@ -1,7 +1,7 @@
 """A suite of weight-step instances (seed 000, eq. 5) for verifying how constraints are handled.
 
 Every instance is one example's problem ``x^T G x - 2 c^T x + const + lam ||x - x~||^2`` on
-``[0, 1]^k`` with ``x_a x_b = 0`` for the exclusive pairs (:class:`facebasis.certify.WeightInstance`).
+``[0, 1]^k`` with ``x_a x_b = 0`` for the exclusive pairs (:class:`facebasis.rigging.certify.WeightInstance`).
 
 ``weight_suite("ict")`` (ICT data from ``../shared``; 53 shapes, 12 pairs) or
 ``weight_suite("default")`` (the built-in face; 15 shapes, 5 pairs) returns, in this order:
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facebasis.certify import WeightInstance
+from facebasis.rigging.certify import WeightInstance
 
 ICT_SUITE_PAIRS = (
     ("mouthLeft", "mouthRight"), ("jawLeft", "jawRight"), ("eyeLookIn_L", "eyeLookOut_L"),
@@ -117,7 +117,7 @@ def closed_form_instances() -> list[WeightInstance]:
 
 def weight_suite(source: str = "ict", seed: int = 0) -> list[WeightInstance]:
     """The suite (see module docstring); ``source`` is ``"ict"`` (needs ``../shared``) or ``"default"``."""
-    from facebasis.transfer import deformation_transfer
+    from facebasis.geometry.transfer import deformation_transfer
 
     if source == "ict":
         from problems.generation import ict_person_problem
@@ -125,8 +125,8 @@ def weight_suite(source: str = "ict", seed: int = 0) -> list[WeightInstance]:
         problems = [ict_person_problem(seed=seed + s) for s in (0, 1)]
         names = ICT_SUITE_PAIRS
     elif source == "default":
-        from facebasis.default_face import EXCLUSIVE_PAIRS
-        from facebasis.synthetic import default_face_problem
+        from facebasis.defaults.face import EXCLUSIVE_PAIRS
+        from facebasis.rigging.synthetic import default_face_problem
 
         problems = [default_face_problem(seed=seed + s, n_train=20) for s in (0, 1)]
         names = EXCLUSIVE_PAIRS

@@ -42,8 +42,8 @@ def write_rig_inputs(root, pp, n_iterations=None):
     ``target.obj``, ``examples/<name>.obj`` and ``weights.json`` (rough weights by shape name)."""
     import json
 
-    from facebasis.meshio import write_mesh
-    from facebasis.rig import write_rig_folder
+    from facebasis.geometry.meshio import write_mesh
+    from facebasis.geometry.rig import write_rig_folder
 
     p = pp.problem
     write_rig_folder(root / "template", p.template)

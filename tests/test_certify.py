@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from facebasis.certify import (box_qp_kkt, brute_force_weights, certified_weights, solve_box_qp,
+from facebasis.rigging.certify import (box_qp_kkt, brute_force_weights, certified_weights, solve_box_qp,
                                weight_objective)
 from facebasis.errors import InputError, SolverError
-from facebasis.formulations import FORMULATIONS, FormulationSolver
+from facebasis.rigging.formulations import FORMULATIONS, FormulationSolver
 from problems.weights_suite import closed_form_instances, weight_suite
 
 
@@ -111,7 +111,7 @@ def test_certified_is_never_worse_than_any_ipopt_formulation(default_suite):
 
 
 def test_polished_weight_step_is_the_certified_optimum(default_suite):
-    from facebasis.weights import WeightSolver
+    from facebasis.rigging.weights import WeightSolver
 
     insts = [i for i in default_suite if i.kind == "natural"][:6]
     G = insts[0].G

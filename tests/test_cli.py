@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from facebasis.cli import main
-from facebasis.default_face import default_person, default_template
-from facebasis.meshio import read_mesh, write_mesh
-from facebasis.rig import load_rig_folder, write_rig_folder
+from facebasis.defaults.face import default_person, default_template
+from facebasis.geometry.meshio import read_mesh, write_mesh
+from facebasis.geometry.rig import load_rig_folder, write_rig_folder
 
 
 @pytest.fixture
@@ -53,7 +53,7 @@ def test_atomic_output_keeps_previous_result_on_failure(template_dir, monkeypatc
             str(template_dir / "person.obj"), "--out", str(out)]
     assert main(args) == 0
     before = sorted(p.name for p in out.iterdir())
-    import facebasis.rig as rigmod
+    import facebasis.geometry.rig as rigmod
 
     calls = {"n": 0}
     real = rigmod.write_mesh

@@ -5,10 +5,10 @@ import json
 import pytest
 
 from facebasis.cli import main
-from facebasis.default_face import default_template
-from facebasis.meshio import write_mesh
-from facebasis.rig import load_rig_folder
-from facebasis.synthetic import default_face_problem
+from facebasis.defaults.face import default_template
+from facebasis.geometry.meshio import write_mesh
+from facebasis.geometry.rig import load_rig_folder
+from facebasis.rigging.synthetic import default_face_problem
 
 from conftest import write_rig_inputs
 

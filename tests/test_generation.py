@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from conftest import requires_ict
 
-from facebasis.default_face import EXCLUSIVE_PAIRS, default_template
+from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 from facebasis.errors import InputError, RigError
-from facebasis.generation import (GenerationOptions, GenerationProblem, basis_energies, basis_step,
+from facebasis.rigging.generation import (GenerationOptions, GenerationProblem, basis_energies, basis_step,
                                   generate_blendshapes, regularisation_weights)
-from facebasis.weights import WeightSolver, eq5_objective
+from facebasis.rigging.weights import WeightSolver, eq5_objective
 
 
 def brute_basis(X, R, At, w, alpha):
@@ -134,8 +134,8 @@ def test_initial_weight_noise_changes_little():
     the true person (the improvement the method makes), measured over all shapes; and the
     generated rig from noisy weights stays closer to the truth than deformation transfer.
     """
-    from facebasis.transfer import deformation_transfer
-    from facebasis.synthetic import default_face_problem
+    from facebasis.geometry.transfer import deformation_transfer
+    from facebasis.rigging.synthetic import default_face_problem
 
     pp = default_face_problem(seed=0, noise=0.0)
     base = generate_blendshapes(pp.problem, GenerationOptions(iterations=5))
@@ -155,7 +155,7 @@ def test_initial_weight_noise_changes_little():
 
 def test_missing_expression_is_flagged():
     """A template without cheek puffs cannot express a cheek-puff example: it must be named."""
-    from facebasis.synthetic import default_face_problem
+    from facebasis.rigging.synthetic import default_face_problem
 
     pp = default_face_problem(seed=1)
     tpl = pp.problem.template
@@ -243,8 +243,8 @@ def test_ict_generation_beats_transfer_on_heldout():
     rig reproduces unseen expressions far better than plain deformation transfer (measured: ratio
     0.32, seed 0). With 20 the ratio is 0.95 on this held-out set: one example per shape cannot pin
     the person's modulations (see problems/bench.py), so no such claim is tested for 20."""
-    from facebasis.generation import reproduction_error
-    from facebasis.transfer import deformation_transfer
+    from facebasis.rigging.generation import reproduction_error
+    from facebasis.geometry.transfer import deformation_transfer
     from problems.generation import ict_person_problem
 
     pp = ict_person_problem(seed=0, n_train=80)

@@ -5,9 +5,9 @@ import pytest
 from conftest import grid_sheet
 
 from facebasis.errors import InputError
-from facebasis.gradients import (deformation_gradients, edge_columns_to_rows, edge_operator, frames_cm,
+from facebasis.geometry.gradients import (deformation_gradients, edge_columns_to_rows, edge_operator, frames_cm,
                                  triangle_edges, triangle_frames)
-from facebasis.poisson import EdgePoisson, choose_anchors
+from facebasis.geometry.poisson import EdgePoisson, choose_anchors
 
 
 def random_rotation(seed):

@@ -5,9 +5,9 @@ import pytest
 from conftest import grid_sheet
 
 from facebasis.errors import MeshError, RigError, TopologyError
-from facebasis.mesh import validate_mesh
-from facebasis.meshio import read_mesh, write_mesh
-from facebasis.rig import Rig, load_rig_folder, write_rig_folder
+from facebasis.geometry.mesh import validate_mesh
+from facebasis.geometry.meshio import read_mesh, write_mesh
+from facebasis.geometry.rig import Rig, load_rig_folder, write_rig_folder
 
 
 def write_obj(path, V, F, extra=""):

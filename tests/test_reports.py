@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from facebasis.cli import main
-from facebasis.default_face import default_template
+from facebasis.defaults.face import default_template
 from facebasis.errors import InputError
-from facebasis.export import write_glb
-from facebasis.rig import write_rig_folder
+from facebasis.geometry.gltf import write_glb
+from facebasis.geometry.rig import write_rig_folder
 
 from conftest import write_rig_inputs
 
@@ -61,7 +61,7 @@ def test_cli_export(tmp_path, capsys):
 
 
 def test_study_tasks_and_a_task_row():
-    from facebasis.studies import COLUMNS, Task, run_task, study_tasks
+    from facebasis.report.studies import COLUMNS, Task, run_task, study_tasks
 
     assert len(study_tasks("alpha", "default")) == 10 and len(study_tasks("grid", "default")) == 30
     assert len(study_tasks("noise", "default", noise_seeds=(0, 1))) == 12
@@ -86,7 +86,7 @@ def test_sweep_cli_on_dask_and_report(tmp_path, capsys):
     out = tmp_path / "res.csv"
     assert main(["sweep", "--problem", "default", "--study", "methods", "--out", str(out), "--workers", "2",
                  "--quiet"]) == 0
-    from facebasis.studies import read_table
+    from facebasis.report.studies import read_table
 
     rows = read_table(out)
     assert [r["method"] for r in rows] == ["template deltas", "deformation transfer", "vertex PCA", "example-based",
@@ -98,7 +98,7 @@ def test_sweep_cli_on_dask_and_report(tmp_path, capsys):
 
 
 def test_sweep_report_from_rows(tmp_path):
-    from facebasis.report import sweep_report
+    from facebasis.report.run_report import sweep_report
 
     rows = []
     for a in (0.01, 0.1, 1.0):
@@ -110,7 +110,7 @@ def test_sweep_report_from_rows(tmp_path):
 
 
 def test_report_of_a_rig_run(tmp_path, capsys):
-    from facebasis.synthetic import default_face_problem
+    from facebasis.rigging.synthetic import default_face_problem
 
     write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=4))
     assert main(["rig", "--template", str(tmp_path / "template"), "--target", str(tmp_path / "target.obj"),
@@ -124,8 +124,8 @@ def test_report_of_a_rig_run(tmp_path, capsys):
 
 
 def test_formulation_report(tmp_path):
-    from facebasis.formulations import compare_formulations
-    from facebasis.report import formulation_report
+    from facebasis.rigging.formulations import compare_formulations
+    from facebasis.report.run_report import formulation_report
     from problems.weights_suite import closed_form_instances
 
     rows = compare_formulations(closed_form_instances())
@@ -140,7 +140,7 @@ def test_run_tasks_on_an_existing_scheduler():
     test) and come back in task order, equal to a direct run."""
     from dask.distributed import LocalCluster
 
-    from facebasis.studies import Task, run_task, run_tasks
+    from facebasis.report.studies import Task, run_task, run_tasks
 
     tasks = [Task("methods", "default", 0, method=m) for m in ("template deltas", "vertex PCA")]
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
@@ -153,8 +153,8 @@ def test_run_tasks_on_an_existing_scheduler():
 def test_generation_problem_rejects_mismatched_virtual_edges():
     import dataclasses
 
-    from facebasis.synthetic import default_face_problem
-    from facebasis.virtual_edges import VirtualEdges
+    from facebasis.rigging.synthetic import default_face_problem
+    from facebasis.contact.virtual_edges import VirtualEdges
 
     p = default_face_problem(seed=0, n_train=3).problem
     other = VirtualEdges(np.array([[0, 1]]), np.ones(1), np.ones(1), 10, 1.0, 2.0, 4, 0.0)

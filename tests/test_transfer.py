@@ -5,7 +5,7 @@ import pytest
 from conftest import bumpy_sheet, requires_ict
 
 from facebasis import DeformationTransfer, Rig, deformation_transfer
-from facebasis.default_face import default_person, default_template
+from facebasis.defaults.face import default_person, default_template
 from facebasis.errors import MeshError, TopologyError
 
 

@@ -8,12 +8,12 @@ import pytest
 from conftest import grid_sheet, requires_ict
 from facebasis.cli import main
 from facebasis.errors import InputError
-from facebasis.meshio import read_mesh, write_mesh
-from facebasis.penetration import (intersecting_pairs, orient3d, penetration_report, triangle_pairs_intersect,
+from facebasis.geometry.meshio import read_mesh, write_mesh
+from facebasis.contact.penetration import (intersecting_pairs, orient3d, penetration_report, triangle_pairs_intersect,
                                    triangle_surface_distance)
-from facebasis.rig import Rig
-from facebasis.transfer import DeformationTransfer
-from facebasis.virtual_edges import VirtualEdges, detect_virtual_edges, virtual_edge_targets
+from facebasis.geometry.rig import Rig
+from facebasis.geometry.transfer import DeformationTransfer
+from facebasis.contact.virtual_edges import VirtualEdges, detect_virtual_edges, virtual_edge_targets
 
 
 def folded_strip(gap=1.0, length=4.0, width=2.0, n_len=17, n_arc=7, n_wid=6):
@@ -91,7 +91,7 @@ def _check_geodesic_decisions(V, F, n_sources=12):
     pygeodesic = pytest.importorskip("pygeodesic.geodesic")
     from scipy.spatial import cKDTree
 
-    from facebasis.virtual_edges import geodesic_pair_distances
+    from facebasis.contact.geodesics import geodesic_pair_distances
 
     ve = detect_virtual_edges(V, F)
     rng = np.random.default_rng(0)
@@ -125,7 +125,7 @@ def _check_geodesic_decisions(V, F, n_sources=12):
 
 
 def test_geodesic_decisions_match_exact_geodesics_on_the_builtin_face():
-    from facebasis.default_face import default_template
+    from facebasis.defaults.face import default_template
 
     rig = default_template()
     _check_geodesic_decisions(rig.neutral, rig.faces)
@@ -212,7 +212,7 @@ def test_proportional_virtual_edges_change_nothing_on_the_templates_own_neutral(
 
 
 def test_virtual_edge_targets_from_precomputed_frames_are_the_same():
-    from facebasis.gradients import frames_cm
+    from facebasis.geometry.gradients import frames_cm
 
     rig, target, _ = press_rig(gap=0.4)
     F = rig.faces
@@ -353,7 +353,7 @@ def test_penetration_report_errors():
 # --- CLI ---------------------------------------------------------------------------------------
 
 def test_cli_virtual_edges_penetration_and_transfer(tmp_path, capsys):
-    from facebasis.rig import write_rig_folder
+    from facebasis.geometry.rig import write_rig_folder
 
     rig, target, _ = press_rig(gap=0.4)
     write_rig_folder(tmp_path / "tpl", rig)
@@ -405,8 +405,8 @@ def test_penetration_figure_draws_layer_crossings_red_and_local_folds_orange(tmp
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facebasis.render import HIGHLIGHT2_RGB, HIGHLIGHT_RGB, draw_mesh
-    from facebasis.report import penetration_figure
+    from facebasis.report.render import HIGHLIGHT2_RGB, HIGHLIGHT_RGB, draw_mesh
+    from facebasis.report.run_report import penetration_figure
 
     V, X, F, step = tucked_strip()
     rep = penetration_report(X, F, references=[V], rest=V, local_within=4 * step)

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write_bytes
-from .errors import MeshError, TopologyError
+from ..atomic import atomic_write_bytes
+from ..errors import MeshError, TopologyError
 from .mesh import same_topology, validate_mesh
 
 MESH_SUFFIXES = (".obj", ".ply")
@@ -48,7 +48,7 @@ def read_mesh(path: str | os.PathLike, *, check_degenerate: bool = False) -> tup
     ------
     MeshError
         Missing, empty or unreadable file, unsupported suffix, no faces, or any check of
-        :func:`facebasis.mesh.validate_mesh`; the message names the file.
+        :func:`facebasis.geometry.mesh.validate_mesh`; the message names the file.
     """
     import trimesh
 
@@ -88,7 +88,7 @@ def read_mesh_like(path: str | os.PathLike, n_vertices: int, F_ref: np.ndarray, 
     ``F_ref`` in the same order); returns its vertices (n, 3).
 
     Raises :class:`TopologyError` naming ``path`` and ``ref_name`` with the expected and found
-    vertex count, or the first differing face (:func:`~facebasis.mesh.same_topology`).
+    vertex count, or the first differing face (:func:`~facebasis.geometry.mesh.same_topology`).
     """
     V, F = read_mesh(path, check_degenerate=check_degenerate)
     if len(V) != n_vertices:

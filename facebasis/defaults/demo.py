@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_directory, atomic_write_json
-from .default_face import default_person, default_template
-from .meshio import write_mesh
-from .rig import write_shapes
-from .transfer import DeformationTransfer
+from ..atomic import atomic_directory, atomic_write_json
+from .face import default_person, default_template
+from ..geometry.meshio import write_mesh
+from ..geometry.rig import write_shapes
+from ..geometry.transfer import DeformationTransfer
 
 
 def _relative_errors(result_deltas, truth_deltas):
@@ -52,10 +52,10 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         log(f"deformation transfer: {template.n_shapes} shapes in {summary['transfer_seconds']:.3f} s; "
             f"median relative error against the person's true shapes {np.median(err):.3f}")
         # example-based generation from training expressions of the person
-        from .synthetic import default_face_problem
+        from ..rigging.synthetic import default_face_problem
 
-        from .generation import GenerationOptions, generate_blendshapes, reproduction_error
-        from .results import write_problem_inputs, write_rig_run
+        from ..rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+        from ..rigging.runs import write_problem_inputs, write_rig_run
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
         options = GenerationOptions(iterations=3 if quick else 10)
@@ -82,7 +82,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         log(f"example-based generation: {len(result.history)} iterations in "
             f"{summary['generation']['seconds']:.2f} s; held-out expression error {heldout['example-based']:.4f} "
             f"vs deformation transfer {heldout['deformation transfer']:.4f}")
-        from .figures import convergence_figure, demo_figures
+        from ..report.figures import convergence_figure, demo_figures
 
         demo_figures(stage / "figures", template, person,
                      {"deformation transfer": transferred, "example-based": result.rig})

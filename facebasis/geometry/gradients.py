@@ -130,7 +130,7 @@ def edge_operator(F: np.ndarray, n_vertices: int) -> sp.csr_matrix:
 
     ``E.T @ E`` is the uniform graph Laplacian of the mesh (interior edges counted twice); its
     null space holds one constant per connected component, the translation freedom that
-    :class:`facebasis.poisson.EdgePoisson` removes with anchors.
+    :class:`facebasis.geometry.poisson.EdgePoisson` removes with anchors.
     """
     m = len(F)
     rows = np.arange(3 * m)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .generation import GenerationProblem
-from .rig import Rig
+from ..geometry.rig import Rig
 
 
 @dataclass(frozen=True)
@@ -102,6 +102,6 @@ def make_person_problem(template: Rig, truth: Rig, exclusive, n_train=20, n_held
 
 
 def default_face_problem(seed: int = 0, n_train: int = 10, n_heldout: int = 10, noise: float = 0.3) -> PersonProblem:
-    from .default_face import EXCLUSIVE_PAIRS, default_person, default_template
+    from ..defaults.face import EXCLUSIVE_PAIRS, default_person, default_template
 
     return make_person_problem(default_template(), default_person(), EXCLUSIVE_PAIRS, n_train, n_heldout, noise, seed)

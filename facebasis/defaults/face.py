@@ -29,7 +29,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .rig import Rig
+from ..geometry.rig import Rig
 
 SHAPE_NAMES = (
     "jawOpen", "mouthSmile_L", "mouthSmile_R", "mouthFrown_L", "mouthFrown_R", "mouthLeft",

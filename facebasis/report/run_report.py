@@ -2,10 +2,10 @@
 
 * :func:`report_run` - a ``facebasis rig`` output folder: convergence, weights, residuals, the
   generated shapes rendered with their displacement.
-* :func:`sweep_report` - a results table of :mod:`facebasis.studies`: alpha and lambda sweeps
+* :func:`sweep_report` - a results table of :mod:`facebasis.report.studies`: alpha and lambda sweeps
   (held-out and training error), the alpha x lambda heat map, initial-weight robustness, the method
   comparison (table + figure).
-* :func:`formulation_report` - the weight-step formulation comparison (:mod:`facebasis.formulations`).
+* :func:`formulation_report` - the weight-step formulation comparison (:mod:`facebasis.rigging.formulations`).
 * :func:`penetration_figure` - close-ups of lips and lids with and without virtual edges, the
   intersecting triangles in red, from arrays saved by the penetration study.
 
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write_bytes
-from .errors import InputError
+from ..atomic import atomic_write_bytes
+from ..errors import InputError
 from .figures import _pyplot, convergence_figure, save
 from .render import draw_mesh
 
@@ -62,7 +62,7 @@ def write_table(out: Path, name: str, header, rows) -> list[Path]:
 
 def report_run(run_dir, out=None, formats=FORMATS) -> list[Path]:
     """Figures of a ``facebasis rig`` output folder (written to ``RUN_DIR/report`` by default)."""
-    from .rig import load_rig_folder
+    from ..geometry.rig import load_rig_folder
 
     run = Path(run_dir)
     hist_path = run / "history.json"
@@ -151,7 +151,7 @@ def _mean_std(rows, key, group_key, group_vals):
 
 
 def sweep_report(rows, out, formats=FORMATS) -> list[Path]:
-    """Figures and tables of a results table (rows of :func:`facebasis.studies.read_table`)."""
+    """Figures and tables of a results table (rows of :func:`facebasis.report.studies.read_table`)."""
     out = Path(out)
     plt = _pyplot()
     paths: list[Path] = []
@@ -241,8 +241,8 @@ def sweep_report(rows, out, formats=FORMATS) -> list[Path]:
 # formulation comparison and penetration
 
 def formulation_report(rows, out, formats=FORMATS) -> list[Path]:
-    """Table and figure of :func:`facebasis.formulations.compare_formulations` rows."""
-    from .formulations import summarise_comparison
+    """Table and figure of :func:`facebasis.rigging.formulations.compare_formulations` rows."""
+    from ..rigging.formulations import summarise_comparison
 
     out = Path(out)
     summary = summarise_comparison(rows)

@@ -26,10 +26,10 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
     ``inputs.json`` (for `facebasis verify`) and ``rig.glb``. Returns the history written."""
     from pathlib import Path
 
-    from .atomic import atomic_write_json
+    from ..atomic import atomic_write_json
     from .examples import weights_to_json
-    from .export import write_glb
-    from .rig import write_shapes
+    from ..geometry.gltf import write_glb
+    from ..geometry.rig import write_shapes
     from .verify import write_inputs
 
     folder = Path(folder)
@@ -52,9 +52,9 @@ def write_problem_inputs(folder, problem):
     (``weights.json``) as files; returns (examples_dir, weights_file)."""
     from pathlib import Path
 
-    from .atomic import atomic_write_json
+    from ..atomic import atomic_write_json
     from .examples import weights_to_json
-    from .meshio import write_mesh
+    from ..geometry.meshio import write_mesh
 
     folder = Path(folder)
     for name, T in zip(problem.example_names, problem.examples):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import MeshError, TopologyError
+from ..errors import MeshError, TopologyError
 
 #: Default floor on the scale-free triangle quality ``q = 4 sqrt(3) area / sum(edge^2)``
 #: (1 for an equilateral triangle, 0 for a degenerate one). Below it a triangle's frame is
@@ -155,3 +155,9 @@ def connected_components(F: np.ndarray, n_vertices: int) -> np.ndarray:
     j = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
     A = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices))
     return cc(A, directed=False)[1]
+
+
+def median_edge_length(V, F) -> float:
+    """Median length of the triangle edges of ``V`` (n, 3), ``F`` (m, 3) (interior edges counted twice)."""
+    e = V[F[:, [1, 2, 0]]] - V[F]
+    return float(np.median(np.linalg.norm(e, axis=2)))

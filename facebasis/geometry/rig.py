@@ -16,8 +16,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .atomic import atomic_directory
-from .errors import RigError, TopologyError
+from ..atomic import atomic_directory
+from ..errors import RigError, TopologyError
 from .meshio import MESH_SUFFIXES, read_mesh, read_mesh_like, write_mesh
 from .mesh import validate_mesh, validate_vertices
 

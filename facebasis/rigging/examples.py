@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, RigError
-from .meshio import MESH_SUFFIXES, read_mesh_like
-from .rig import Rig
+from ..errors import InputError, RigError
+from ..geometry.meshio import MESH_SUFFIXES, read_mesh_like
+from ..geometry.rig import Rig
 
 
 def load_examples(folder: str | os.PathLike, template: Rig) -> tuple[tuple[str, ...], np.ndarray]:

@@ -4,9 +4,9 @@ method comparison and penetration, run in parallel on Dask and written as one re
 Every task is a small frozen record (problem name, seed, settings); a worker builds the problem
 itself (cached per worker process), so nothing large travels between processes. Each task runs
 single-threaded: the parallelism is across tasks. Results come back in task order, so the table is
-the same whatever the scheduling. The report module (:mod:`facebasis.report`) only reads the table.
+the same whatever the scheduling. The report module (:mod:`facebasis.report.run_report`) only reads the table.
 
-Problems: ``default`` (the built-in face, :func:`facebasis.synthetic.default_face_problem`) and
+Problems: ``default`` (the built-in face, :func:`facebasis.rigging.synthetic.default_face_problem`) and
 ``ict`` (``problems.generation.ict_person_problem``, needs ``../shared``).
 """
 
@@ -22,7 +22,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 STUDIES = ("alpha", "lambda", "grid", "noise", "methods")
 ALPHAS = tuple(float(a) for a in np.geomspace(0.01, 10.0, 10))
@@ -51,7 +51,7 @@ class Task:
 def person_problem(name: str, seed: int):
     """The person problem ``name`` (default / ict) for ``seed``, cached per process."""
     if name == "default":
-        from .synthetic import default_face_problem
+        from ..rigging.synthetic import default_face_problem
 
         return default_face_problem(seed=seed, n_train=10, n_heldout=10)
     if name == "ict":
@@ -71,7 +71,7 @@ def _rough(pp, noise: float, noise_seed: int) -> np.ndarray:
 @lru_cache(maxsize=4)
 def _reference_rig(name: str, seed: int):
     """The rig generated from the true weights (noise 0): the reference of the noise study."""
-    from .generation import GenerationOptions, generate_blendshapes
+    from ..rigging.generation import GenerationOptions, generate_blendshapes
 
     pp = person_problem(name, seed)
     p = dataclasses.replace(pp.problem, initial_weights=pp.true_weights)
@@ -94,8 +94,8 @@ def run_task(task: Task) -> dict:
     """Run one task; returns one row of the results table (see :data:`COLUMNS`)."""
     from threadpoolctl import threadpool_limits
 
-    from .generation import GenerationOptions, generate_blendshapes, reproduction_error
-    from .transfer import DeformationTransfer
+    from ..rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+    from ..geometry.transfer import DeformationTransfer
 
     with threadpool_limits(1):
         pp = person_problem(task.problem, task.seed)
@@ -122,7 +122,7 @@ def run_task(task: Task) -> dict:
                 kw["lam"] = task.lam
             opts = GenerationOptions(threads=1, **kw)
             if task.method == "example-based + virtual edges":
-                from .virtual_edges import detect_virtual_edges
+                from ..contact.virtual_edges import detect_virtual_edges
 
                 ve = detect_virtual_edges(p.template.neutral, p.template.faces)
                 p = dataclasses.replace(p, virtual_edges=ve)
@@ -221,7 +221,7 @@ def write_table(rows, path) -> None:
     """Write the results table as CSV, atomically."""
     from pathlib import Path
 
-    from .atomic import atomic_write_bytes
+    from ..atomic import atomic_write_bytes
 
     atomic_write_bytes(Path(path), table_csv(rows).encode())
 

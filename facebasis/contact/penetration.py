@@ -28,8 +28,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from .errors import InputError
-from .mesh import validate_mesh
+from ..errors import InputError
+from ..geometry.mesh import validate_mesh
 
 _EPS = 2.0 ** -53
 _O3D_BOUND = (7.0 + 56.0 * _EPS) * _EPS  # Shewchuk's o3derrboundA
@@ -291,10 +291,10 @@ def triangle_surface_distance(V, F, pairs, limit: float) -> np.ndarray:
     """Graph geodesic distance along the surface (V, F) between two triangles, (p,).
 
     The smallest of the nine vertex-to-vertex distances of each pair (p, 2) of triangle indices, by
-    the bounded Dijkstra of :func:`facebasis.virtual_edges.geodesic_pair_distances` (mesh edges and
+    the bounded Dijkstra of :func:`facebasis.contact.geodesics.geodesic_pair_distances` (mesh edges and
     unfolded segments across adjacent triangles); ``inf`` beyond ``limit``.
     """
-    from .virtual_edges import geodesic_pair_distances
+    from .geodesics import geodesic_pair_distances
 
     P = np.asarray(pairs, np.int64).reshape(-1, 2)
     if len(P) == 0:

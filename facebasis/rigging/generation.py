@@ -12,9 +12,9 @@ of the target and rough weights ``x~``, alternate
 
   with ``A~_i`` the deformation transfer of template shape i and per-triangle weights
   ``w_i = ((1 + s_i) / (mu + s_i))^sigma`` (mu = 0.1, sigma = 2); then reconstruct vertex deltas
-  from the edges with the factor-once :class:`~facebasis.poisson.EdgePoisson`;
-* the **weight step** (eq. 5): :class:`~facebasis.weights.WeightSolver` (CasADi + IPOPT, then the
-  certified global optimum of every example by branch and bound, :mod:`facebasis.certify`).
+  from the edges with the factor-once :class:`~facebasis.geometry.poisson.EdgePoisson`;
+* the **weight step** (eq. 5): :class:`~facebasis.rigging.weights.WeightSolver` (CasADi + IPOPT, then the
+  certified global optimum of every example by branch and bound, :mod:`facebasis.rigging.certify`).
 
 Per triangle the basis step is the k x k system ``(X X^T + alpha W) Y = X R + alpha W A~``; with
 m < k it is solved through the m x m Woodbury form, in blocks of triangles with BLAS matrix
@@ -38,11 +38,11 @@ import numpy as np
 
 from threadpoolctl import threadpool_limits
 
-from .errors import InputError
-from .gradients import frames_cm
-from .mesh import validate_vertices
-from .rig import Rig
-from .transfer import DeformationTransfer
+from ..errors import InputError
+from ..geometry.gradients import frames_cm
+from ..geometry.mesh import validate_vertices
+from ..geometry.rig import Rig
+from ..geometry.transfer import DeformationTransfer
 from .weights import WeightSolver, WeightSolution, eq5_objective
 
 
@@ -61,7 +61,7 @@ class GenerationProblem:
     initial_weights : (m, k) rough weights ``x~`` in [0, 1]
     example_names : m names (e.g. file stems)
     exclusive : pairs of shape names that are mutually exclusive (complementarity)
-    virtual_edges : optional :class:`~facebasis.virtual_edges.VirtualEdges` (seed 004): their energy
+    virtual_edges : optional :class:`~facebasis.contact.virtual_edges.VirtualEdges` (seed 004): their energy
         joins every reconstruction of the basis step, with the deformation-transfer targets
     """
 
@@ -289,7 +289,7 @@ def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
     """Eq. 4 for every triangle in the triangle-major layout of :func:`_basis_block`.
 
     Returns (out (2, m_tri, 3, k), E_fit, E_reg); ``out.reshape(2 m_tri, 3k)`` is what
-    :meth:`facebasis.poisson.EdgePoisson.solve_frame_rows` takes.
+    :meth:`facebasis.geometry.poisson.EdgePoisson.solve_frame_rows` takes.
     """
     k, m = X.shape
     m_tri = RT.shape[1]

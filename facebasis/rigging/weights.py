@@ -13,7 +13,7 @@ magnitude slower). The CasADi problem is built once, symbolic in ``G``, ``C``, `
 
 The complementarity constraint violates the usual constraint qualifications, so IPOPT can stop a
 little off the constraint set, or at a non-optimal point. Each IPOPT answer is therefore
-*polished* by the certified solver of :mod:`facebasis.certify`: per example, branch and bound over
+*polished* by the certified solver of :mod:`facebasis.rigging.certify`: per example, branch and bound over
 the pairs, seeded with IPOPT's branch, every box-QP solved exactly. The polished point satisfies
 the bounds and every complementarity constraint exactly, is a certified global optimum of each
 example's problem and is never worse than IPOPT's; IPOPT's status, its raw answer and the
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .certify import CertifiedWeightSolver
-from .errors import InputError, SolverError
+from ..errors import InputError, SolverError
 
 #: IPOPT return statuses that count as a successful solve.
 IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -205,7 +205,7 @@ class WeightSolver:
     def _polish(self, G, C, const, X_prior, lam, X_ipopt):
         """Certified global optimum of every example, starting from IPOPT's branch.
 
-        :class:`~facebasis.certify.CertifiedWeightSolver` (branch and bound over the pairs, exact box-QPs)
+        :class:`~facebasis.rigging.certify.CertifiedWeightSolver` (branch and bound over the pairs, exact box-QPs)
         seeded with IPOPT's answer: the result satisfies bounds and pairs exactly and is never worse
         than IPOPT's. Returns weights, max KKT residual, total nodes and the max certificate gap.
         """

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 from .gradients import frames_cm, triangle_frames
 from .mesh import validate_mesh, validate_vertices
 from .poisson import EdgePoisson, choose_anchors
@@ -42,10 +42,14 @@ class DeformationTransfer:
     target_neutral : (n, 3) the target's neutral ``B_0`` in the template's topology
     anchors : optional (a,) anchor vertices (default :func:`rig_anchors`)
     extra_rows, extra_weight : optional additional rows for :class:`EdgePoisson`
-    virtual_edges : optional :class:`~facebasis.virtual_edges.VirtualEdges` (seed 004): adds the
-        virtual-edge energy ``virtual_weight * sum ||(x_v - x_u) - t_i||^2`` to the solve
-    virtual_weight : its weight (default :data:`~facebasis.virtual_edges.DEFAULT_VIRTUAL_WEIGHT`)
-    virtual_mode : ``"proportional"`` (default) or ``"gradient"`` targets (:func:`~facebasis.virtual_edges.virtual_edge_targets`)
+    virtual_edges : optional extra edge term, e.g. :class:`facebasis.contact.virtual_edges.VirtualEdges`
+        (Li, Shen, Liu 2023): adds ``virtual_weight * sum ||(x_v - x_u) - t_i||^2`` to the solve.
+        Geometry does not import the contact method; it uses the object's interface: ``n_vertices``,
+        ``len()``, ``source``, ``operator()`` (sparse (e, n)), ``default_weight``, ``modes`` and
+        ``targets(template_neutral, deltas, target_neutral, F, mode, neutral_frames, frame_deltas)``
+        -> (k, e, 3)
+    virtual_weight : its weight (default: the term's ``default_weight``, 1 for virtual edges)
+    virtual_mode : ``"proportional"`` (default) or ``"gradient"`` targets (:func:`~facebasis.contact.virtual_edges.virtual_edge_targets`)
 
     Examples
     --------
@@ -70,16 +74,14 @@ class DeformationTransfer:
         self.virtual_edges = virtual_edges
         self.virtual_mode = virtual_mode
         if virtual_edges is not None:
-            from .virtual_edges import DEFAULT_VIRTUAL_WEIGHT, VIRTUAL_MODES
-
-            if virtual_mode not in VIRTUAL_MODES:
-                raise InputError(f"virtual edge mode: expected one of {VIRTUAL_MODES}, found {virtual_mode!r}")
+            if virtual_mode not in virtual_edges.modes:
+                raise InputError(f"virtual edge mode: expected one of {virtual_edges.modes}, found {virtual_mode!r}")
             if extra_rows is not None:
                 raise InputError("DeformationTransfer: expected either virtual_edges or extra_rows, found both")
             if virtual_edges.n_vertices != template.n_vertices:
                 raise InputError(f"virtual edges ({virtual_edges.source}): expected a mesh of {template.n_vertices} "
                                  f"vertices, found edges for {virtual_edges.n_vertices}")
-            extra_weight = DEFAULT_VIRTUAL_WEIGHT if virtual_weight is None else float(virtual_weight)
+            extra_weight = virtual_edges.default_weight if virtual_weight is None else float(virtual_weight)
             if not (extra_weight > 0 and np.isfinite(extra_weight)):
                 raise InputError(f"virtual edge weight: expected a positive number, found {extra_weight}")
             extra_rows = virtual_edges.operator() if len(virtual_edges) else None
@@ -126,12 +128,9 @@ class DeformationTransfer:
         ``frame_deltas`` (k, 3, 3, m): those shapes' ``A_i^S - A_0^S`` if already computed."""
         if self.virtual_edges is None or self.poisson.extra_rows is None:
             return None
-        from .virtual_edges import virtual_edge_targets
-
         D = self.template.deltas if deltas is None else deltas
-        T = virtual_edge_targets(self.virtual_edges, self.template.neutral, D, self.target_neutral,
-                                 self.template.faces, self.virtual_mode, self.template_frames,
-                                 frame_deltas)  # (k, e, 3)
+        T = self.virtual_edges.targets(self.template.neutral, D, self.target_neutral, self.template.faces,
+                                       self.virtual_mode, self.template_frames, frame_deltas)  # (k, e, 3)
         return np.ascontiguousarray(np.moveaxis(T, 2, 1)).reshape(len(D) * 3, -1)
 
     def anchor_values(self, deltas: np.ndarray | None = None) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import InputError, MeshError
+from ..errors import InputError, MeshError
 from .gradients import edge_operator, frame_edge_operator
 from .mesh import connected_components
 
@@ -159,7 +159,7 @@ class EdgePoisson:
         Parameters
         ----------
         edge_targets : (..., m, 3, d) target vectors of the three edges of every triangle
-            (order of :data:`facebasis.gradients.EDGE_CORNERS`); leading axes are batched
+            (order of :data:`facebasis.geometry.gradients.EDGE_CORNERS`); leading axes are batched
         anchor_values : (..., a, d) values at the anchors (default 0)
         extra_targets : (..., r, d) targets of the extra rows, if any
 
@@ -195,7 +195,7 @@ class EdgePoisson:
         return self._solve_rhs(np.asarray(self._Et @ edge_cols.T), anchor_cols, extra_cols)
 
     def _frame_operator(self):
-        """``E^T C S`` (n, 2m) with S = :func:`~facebasis.gradients.frame_edge_operator`: frame edge
+        """``E^T C S`` (n, 2m) with S = :func:`~facebasis.geometry.gradients.frame_edge_operator`: frame edge
         columns ``[a_1..a_m, b_1..b_m]`` straight to right-hand sides; built once."""
         if self._frame_op is None:
             self._frame_op = (self._Ew.T @ frame_edge_operator(self.n_faces)).tocsr()

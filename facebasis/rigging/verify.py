@@ -9,7 +9,7 @@ stored weight vector should be the global optimum of its example's problem
     min_x ||B x - t_j||^2 + lambda ||x - x~_j||^2,   0 <= x <= 1,   x_a x_b = 0.
 
 This module recomputes the Gram data from the meshes on disk, solves each example with
-:func:`facebasis.certify.certified_weights`, and reports per example the objective gap of the
+:func:`facebasis.rigging.certify.certified_weights`, and reports per example the objective gap of the
 stored weights, their complementarity and bound residuals and a verdict.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .certify import CertifiedWeightSolver, weight_objective
-from .errors import InputError
+from ..errors import InputError
 
 INPUTS_FILE = "inputs.json"
 
@@ -82,7 +82,7 @@ def write_inputs(stage: Path, examples_dir, weights_file, exclusive, final_lambd
     Paths are stored absolute, or relative to ``relative_to`` (the run folder's final location)
     when given, so a self-contained folder can be moved.
     """
-    from .atomic import atomic_write_json
+    from ..atomic import atomic_write_json
 
     def rel(p):
         p = Path(p).resolve()
@@ -101,7 +101,7 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     product ``|x_a x_b|`` of the stored weights over all examples (:class:`PairCheck`), so a user
     can confirm that a constraint they meant to impose holds, whatever the run recorded."""
     from .examples import load_examples, load_weights, parse_pairs
-    from .rig import load_rig_folder
+    from ..geometry.rig import load_rig_folder
 
     run = Path(run_dir)
     path = run / INPUTS_FILE

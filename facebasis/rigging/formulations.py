@@ -1,6 +1,6 @@
 """IPOPT formulations of the complementarity constraints of eq. 5 (seed 000), for comparison.
 
-One example's weight problem (see :mod:`facebasis.certify`)
+One example's weight problem (see :mod:`facebasis.rigging.certify`)
 
     min_x  x^T (G + lambda I) x - 2 (c + lambda x~)^T x + const,   0 <= x <= 1,   x_a x_b = 0
 
@@ -19,7 +19,7 @@ lambda and its own parameter, and reused for every instance of the same size and
     ``f + rho sum x_a x_b`` (only bounds as constraints), rho = 1, 10, ... until the pairs hold to
     1e-9 or rho = 1e8 (an exact penalty for MPCCs, Ralph & Wright 2004).
 
-The certified optimum from :func:`facebasis.certify.certified_weights` is the yardstick.
+The certified optimum from :func:`facebasis.rigging.certify.certified_weights` is the yardstick.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ class FormulationSolver:
     def __init__(self, k: int, pairs, formulation: str = "equality", ipopt_options: dict | None = None):
         import casadi as ca
 
-        from .errors import InputError
+        from ..errors import InputError
 
         if formulation not in FORMULATIONS:
             raise InputError(f"formulation: expected one of {FORMULATIONS}, found {formulation!r}")
@@ -128,7 +128,7 @@ __all__ = ["FORMULATIONS", "FormulationResult", "FormulationSolver"]
 
 
 def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 1e-6, progress=None) -> list[dict]:
-    """Solve every instance (:class:`facebasis.certify.WeightInstance`) with the certified solver and
+    """Solve every instance (:class:`facebasis.rigging.certify.WeightInstance`) with the certified solver and
     with each IPOPT formulation; one row per (instance, method) as plain dicts (a results table).
 
     Columns: instance, kind, method, objective, certified_objective, relative_gap (method minus

@@ -22,7 +22,7 @@ def save(fig, path: Path, formats=("png",)) -> list[Path]:
     """Save a figure in each format (atomically per file) and close it."""
     import io
 
-    from .atomic import atomic_write_bytes
+    from ..atomic import atomic_write_bytes
 
     paths = []
     for fmt in formats:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, SolverError
+from ..errors import InputError, SolverError
 
 #: DAQP exit flags that mean "optimal" (1) or "optimal, soft constraints violated" (2).
 _DAQP_OK = (1, 2)

@@ -1,0 +1,60 @@
+"""Argument helpers shared by several command groups."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_rig_folder_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--template", required=True, help="template rig folder (neutral + one mesh per blendshape)")
+    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the rig folder")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+
+
+def virtual_edges_for(args, template):
+    """``--virtual-edges [EDGES.json]``: read the file, or detect on the template's neutral."""
+    if args.virtual_edges is None:
+        return None
+    from ..contact.virtual_edges import VirtualEdges, detect_virtual_edges
+
+    if args.virtual_edges == "detect":
+        ve = detect_virtual_edges(template.neutral, template.faces, name=f"template {template.source}")
+        print(f"virtual edges: {len(ve)} detected on the template neutral in {ve.seconds:.2f} s")
+        return ve
+    ve = VirtualEdges.read(args.virtual_edges, template.n_vertices)
+    print(f"virtual edges: {len(ve)} from {args.virtual_edges}")
+    return ve
+
+
+def add_virtual_edge_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--virtual-edges", nargs="?", const="detect", default=None, metavar="EDGES.json",
+                   help="add the virtual-edge energy against penetration (seed 004); without a file the "
+                        "edges are detected on the template neutral with the default parameters")
+    p.add_argument("--virtual-weight", type=float, default=None,
+                   help="weight of the virtual-edge energy (default: facebasis.contact.virtual_edges.DEFAULT_VIRTUAL_WEIGHT)")
+    p.add_argument("--virtual-mode", choices=("proportional", "gradient"), default="proportional",
+                   help="virtual-edge targets: the template's gap motion scaled down to a thinner target "
+                        "gap (proportional, default) or the local gradient only (gradient)")
+
+
+def pair_of_floats(text: str, name: str) -> tuple[float, float]:
+    from ..errors import InputError
+
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError as exc:
+        raise InputError(f"{name}: expected two numbers FIRST,LAST, found {text!r}") from exc
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2:
+        raise InputError(f"{name}: expected two numbers FIRST,LAST, found {text!r}")
+    return vals[0], vals[1]
+
+
+def describe_pairs(pairs, given: int) -> str:
+    """``"3 exclusive pairs: a:b, c:d, e:f"`` (and how many repeats of a pair were merged)."""
+    text = f"{len(pairs)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in pairs) if pairs else "")
+    if given > len(pairs):
+        text += f" ({given - len(pairs)} repeated pair(s) merged)"
+    return text

@@ -1,0 +1,18 @@
+"""Keeping thin facial layers apart: virtual edges and an exact intersection counter.
+
+Virtual edges join vertices that are close in space but far along the surface (lips, lids) and
+are kept, softly, transformed like real edges during deformation transfer and generation. The
+counter finds every intersecting triangle pair exactly (Shewchuk-style exact predicates) and
+splits new pairs into local folds and layer crossings.
+
+Modules
+-------
+geodesics      bounded graph geodesics (Dijkstra on an unfolded edge graph), on all cores
+virtual_edges  detection, thinning, targets and the energy's operator
+penetration    exact triangle-pair intersection, new-pair reports, local folds vs layer crossings
+
+References
+----------
+Li Hanchao, Shen Chengze, Liu Xinguo. Facial blendshape generation with virtual-edge constraints
+    (带虚拟边约束的面部表情基生成算法). Chinese Journal of Computers, 2023(11).
+"""

@@ -1,0 +1,20 @@
+"""Geometry core shared by every method: meshes, files, triangle frames, factor-once solves.
+
+Imports nothing of the methods (:mod:`facebasis.contact`, :mod:`facebasis.rigging`, capture,
+retarget); an extra edge term such as virtual edges reaches deformation transfer through a small
+object interface (see :class:`~facebasis.geometry.transfer.DeformationTransfer`).
+
+Modules
+-------
+mesh        validation of vertex and face arrays, median edge length
+meshio      OBJ/PLY reading and writing (atomic), "read a mesh in a reference's topology"
+gradients   triangle frames and deformation gradients, the frame-to-edge operator
+poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
+transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
+rig         the :class:`Rig` type, rig folders
+gltf        a rig as glTF 2.0 binary with one morph target per shape
+
+References
+----------
+Sumner R. W., Popovic J. Deformation transfer for triangle meshes. ACM SIGGRAPH 2004.
+"""

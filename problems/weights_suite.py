@@ -1,4 +1,4 @@
-"""A suite of weight-step instances (seed 000, eq. 5) for verifying how constraints are handled.
+"""A suite of weight-step instances (Gao et al. 2015, eq. 5) for verifying how constraints are handled.
 
 Every instance is one example's problem ``x^T G x - 2 c^T x + const + lam ||x - x~||^2`` on
 ``[0, 1]^k`` with ``x_a x_b = 0`` for the exclusive pairs (:class:`facebasis.rigging.certify.WeightInstance`).

@@ -20,11 +20,23 @@ from . import contact, demo, report, rigging
 GROUPS = (demo, rigging, contact, report)
 
 
+DESCRIPTION = ("facebasis: personalised facial blendshape rigs (deformation transfer, example-based "
+               "generation with certified weights), kept free of layer penetration (virtual edges, an exact "
+               "counter). Errors exit with status 2.")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="facebasis", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    from .. import __version__
+
+    parser = argparse.ArgumentParser(prog="facebasis", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"facebasis {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in GROUPS:
         group.register(sub)
+    for action in sub._choices_actions:  # each command's --help opens with its one-line summary
+        command = sub.choices[action.dest]
+        if command.description is None:
+            command.description = action.help[:1].upper() + action.help[1:] + "."
     return parser
 
 

@@ -7,7 +7,8 @@ import argparse
 
 def add_rig_folder_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--template", required=True, help="template rig folder (neutral + one mesh per blendshape)")
-    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the rig folder")
+    p.add_argument("--neutral", default="neutral.obj",
+                   help="file name of the neutral inside the rig folder (default neutral.obj)")
     p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
                    help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
 
@@ -28,12 +29,14 @@ def virtual_edges_for(args, template):
 
 
 def add_virtual_edge_args(p: argparse.ArgumentParser) -> None:
+    from ..contact.virtual_edges import DEFAULT_VIRTUAL_WEIGHT, VIRTUAL_MODES
+
     p.add_argument("--virtual-edges", nargs="?", const="detect", default=None, metavar="EDGES.json",
-                   help="add the virtual-edge energy against penetration (seed 004); without a file the "
+                   help="add the virtual-edge energy against penetration (Li et al. 2023); without a file the "
                         "edges are detected on the template neutral with the default parameters")
     p.add_argument("--virtual-weight", type=float, default=None,
-                   help="weight of the virtual-edge energy (default: facebasis.contact.virtual_edges.DEFAULT_VIRTUAL_WEIGHT)")
-    p.add_argument("--virtual-mode", choices=("proportional", "gradient"), default="proportional",
+                   help=f"weight of the virtual-edge energy (default {DEFAULT_VIRTUAL_WEIGHT:g})")
+    p.add_argument("--virtual-mode", choices=VIRTUAL_MODES, default=VIRTUAL_MODES[0],
                    help="virtual-edge targets: the template's gap motion scaled down to a thinner target "
                         "gap (proportional, default) or the local gradient only (gradient)")
 

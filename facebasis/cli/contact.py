@@ -60,15 +60,18 @@ def cmd_penetration(args) -> int:
 def register(sub) -> None:
     """Add this group's subcommands to the ``facebasis`` parser."""
     from ..contact.penetration import LOCAL_FOLD_EDGES
+    from ..contact.virtual_edges import DEFAULT_CAP_EDGES, DEFAULT_PER_VERTEX, DEFAULT_RATIO, DEFAULT_SPACING_EDGES
 
-    p = sub.add_parser("virtual-edges", help="detect virtual edges across thin layers (seed 004)")
+    p = sub.add_parser("virtual-edges", help="detect virtual edges across thin layers (Li et al. 2023)")
     p.add_argument("mesh", help="neutral mesh (.obj/.ply)")
     p.add_argument("--out", required=True, help="output EDGES.json")
-    p.add_argument("--cap", type=float, default=None, help="Euclidean cap in mesh units (default 3.3 median edge lengths)")
-    p.add_argument("--ratio", type=float, default=2.0, help="geodesic/Euclidean floor (default 2)")
-    p.add_argument("--per-vertex", type=int, default=4, help="edges kept per vertex (default 4)")
+    p.add_argument("--cap", type=float, default=None, help=f"Euclidean cap in mesh units (default {DEFAULT_CAP_EDGES:g} median edge lengths)")
+    p.add_argument("--ratio", type=float, default=DEFAULT_RATIO, help=f"geodesic/Euclidean floor (default {DEFAULT_RATIO:g})")
+    p.add_argument("--per-vertex", type=int, default=DEFAULT_PER_VERTEX,
+                   help=f"edges kept per vertex (default {DEFAULT_PER_VERTEX})")
     p.add_argument("--spacing", type=float, default=None,
-                   help="exclusion radius around chosen ends, mesh units (default 0: no exclusion)")
+                   help=f"exclusion radius around chosen ends, mesh units (default {DEFAULT_SPACING_EDGES:g} median "
+                        "edge lengths; 0: no exclusion)")
     p.add_argument("--region", default=None, metavar="START:END", help="only vertices START..END-1 as ends")
     p.add_argument("--figure", default=None, metavar="PNG", help="also draw the edges over the mesh")
     p.set_defaults(func=cmd_virtual_edges)

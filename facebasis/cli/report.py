@@ -50,7 +50,7 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="alpha / lambda / noise / method studies in parallel (Dask)")
     p.add_argument("--problem", default="default", choices=("default", "ict"),
                    help="person problem: the built-in face (default) or ICT (needs ../shared)")
-    p.add_argument("--study", default="all", help="alpha, lambda, grid, noise, methods, a comma list, or all")
+    p.add_argument("--study", default="all", help="alpha, lambda, grid, noise, methods, a comma list, or all (default all)")
     p.add_argument("--seeds", default="0", help="problem seeds, comma separated (default 0)")
     p.add_argument("--out", required=True, help="results table (.csv)")
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (default: a local cluster)")

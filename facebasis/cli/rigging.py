@@ -110,6 +110,11 @@ def cmd_export(args) -> int:
 
 def register(sub) -> None:
     """Add this group's subcommands to the ``facebasis`` parser."""
+    from ..rigging.generation import GenerationOptions
+
+    defaults = GenerationOptions()
+    alpha = ",".join(f"{a:g}" for a in defaults.alpha)
+    lam = ",".join(f"{a:g}" for a in defaults.lam)
     p = sub.add_parser("transfer", help="deformation transfer of a template rig onto a target neutral")
     add_rig_folder_args(p)
     p.add_argument("--target", required=True, help="target neutral mesh (.obj/.ply), template topology")
@@ -117,15 +122,16 @@ def register(sub) -> None:
     add_virtual_edge_args(p)
     p.set_defaults(func=cmd_transfer)
 
-    p = sub.add_parser("rig", help="example-based blendshape generation (seed 000)")
+    p = sub.add_parser("rig", help="example-based blendshape generation (Gao et al. 2015)")
     add_rig_folder_args(p)
     p.add_argument("--target", required=True, help="target neutral mesh, template topology")
     p.add_argument("--examples", required=True, help="folder of training expression meshes (names = file stems)")
     p.add_argument("--weights", required=True, help='rough weights JSON: {"ex00": {"jawOpen": 0.8}}')
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--iterations", type=int, default=10, help="alternations (default 10)")
-    p.add_argument("--alpha", default="0.5,0.1", help="alpha schedule FIRST,LAST (default 0.5,0.1)")
-    p.add_argument("--lambda", dest="lam", default="100,10", help="lambda schedule FIRST,LAST (default 100,10)")
+    p.add_argument("--iterations", type=int, default=defaults.iterations,
+                   help=f"alternations (default {defaults.iterations})")
+    p.add_argument("--alpha", default=alpha, help=f"alpha schedule FIRST,LAST (default {alpha})")
+    p.add_argument("--lambda", dest="lam", default=lam, help=f"lambda schedule FIRST,LAST (default {lam})")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")
@@ -134,7 +140,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
     p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a `facebasis rig` output")
-    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder")
+    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder (default neutral.obj)")
     p.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="ignore matching files")
     p.add_argument("--out", required=True, help="output .glb")
     p.set_defaults(func=cmd_export)

@@ -1,4 +1,4 @@
-"""Exact counting of self-intersecting triangle pairs (surface penetration, seed 004).
+"""Exact counting of self-intersecting triangle pairs (surface penetration, Li et al. 2023).
 
 A *penetration* is a pair of triangles that share no vertex and intersect (closed sets: touching
 counts). Pairs that share a vertex or an edge are neighbours on the surface and are not counted.
@@ -19,6 +19,11 @@ Method
 
 Cross-checked in the tests against a brute-force count and against libigl's CGAL-based
 ``remesh_self_intersections(detect_only=True)``.
+
+References
+----------
+- Li Hanchao, Shen Chengze, Liu Xinguo. Facial blendshape generation with virtual-edge constraints
+    (带虚拟边约束的面部表情基生成算法). Chinese Journal of Computers, 2023(11).
 """
 
 from __future__ import annotations
@@ -315,7 +320,7 @@ def penetration_report(V, F, references=(), face_mask=None, zones=None, referenc
     rest, local_within : optional rest mesh (n, 3) (e.g. the target neutral) and a distance: new
         pairs whose triangles are within ``local_within`` along the rest surface
         (:func:`triangle_surface_distance`) are *local folds*, the others *layer crossings*. Virtual
-        edges (seed 004) join points far apart along the surface, so they address the second kind.
+        edges (Li et al. 2023) join points far apart along the surface, so they address the second kind.
     """
     if (rest is None) != (local_within is None):
         raise InputError("penetration_report: expected rest and local_within together, found only "

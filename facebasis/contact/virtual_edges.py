@@ -1,4 +1,4 @@
-"""Virtual edges across thin multi-layer regions (seed 004; digest: ``../shared/notes/method.md`` B).
+"""Virtual edges across thin multi-layer regions (Li, Shen, Liu 2023; see References).
 
 Where the face is thin and layered (lips against each other and the mouth socket, upper against
 lower eyelid) two vertices can be close in space but far apart along the surface. Deformation
@@ -36,6 +36,13 @@ deformation transfer (same factor-once solve, one extra sparse term ``w X^T X``)
 targets a gap keeps its length up to the local rotation and stretch, so layers do not cross; with
 the proportional ones a thinner target layer closes by proportionally less than the template's and
 transfer onto the template's own neutral still returns the template exactly.
+
+References
+----------
+- Li Hanchao, Shen Chengze, Liu Xinguo. Facial blendshape generation with virtual-edge constraints
+    (带虚拟边约束的面部表情基生成算法). Chinese Journal of Computers, 2023(11).
+- Sumner R. W., Popovic J. Deformation transfer for triangle meshes. ACM Transactions on Graphics
+    23(3) (SIGGRAPH 2004): 399-405.
 """
 
 from __future__ import annotations
@@ -63,6 +70,8 @@ DEFAULT_VIRTUAL_WEIGHT = 1.0
 #: exclusion of 1.5 edge lengths keeps 618 instead of 5835 edges and halves the reduction of new
 #: intersecting pairs (24% instead of 44% at weight 3 with gradient targets).
 DEFAULT_SPACING_EDGES = 0.0
+#: Default number of virtual edges kept per vertex (the paper: the 3-5 shortest).
+DEFAULT_PER_VERTEX = 4
 
 
 @dataclass(frozen=True)
@@ -173,9 +182,9 @@ def thin_candidates(V, pairs, lengths, per_vertex: int, spacing: float) -> np.nd
     return np.asarray(keep, dtype=np.int64)
 
 
-def detect_virtual_edges(V, F, cap: float | None = None, ratio: float = DEFAULT_RATIO, per_vertex: int = 4,
+def detect_virtual_edges(V, F, cap: float | None = None, ratio: float = DEFAULT_RATIO, per_vertex: int = DEFAULT_PER_VERTEX,
                          spacing: float | None = None, vertex_mask=None, name: str = "mesh") -> VirtualEdges:
-    """Detect virtual edges on a mesh (seed 004).
+    """Detect virtual edges on a mesh (Li et al. 2023).
 
     Parameters
     ----------
@@ -290,4 +299,5 @@ def virtual_edge_targets(edges: VirtualEdges, template_neutral, template_deltas,
 
 
 __all__ = ["VirtualEdges", "detect_virtual_edges", "thin_candidates", "virtual_edge_targets", "vertex_gradients",
-           "DEFAULT_RATIO", "VIRTUAL_MODES"]
+           "DEFAULT_RATIO", "DEFAULT_CAP_EDGES", "DEFAULT_PER_VERTEX", "DEFAULT_SPACING_EDGES",
+           "DEFAULT_VIRTUAL_WEIGHT", "VIRTUAL_MODES"]

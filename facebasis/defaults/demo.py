@@ -5,7 +5,7 @@ Writes into one folder (atomically):
 * ``template/`` - the generic default rig (neutral + blendshapes as OBJ)
 * ``person_neutral.obj`` - the second person's neutral
 * ``transfer/`` - deformation transfer of the template onto the person
-* ``rig/`` - example-based generation (seed 000) from 10 training expressions of the person with
+* ``rig/`` - example-based generation (Gao et al. 2015) from 10 training expressions of the person with
   rough (noisy) weights: the generated blendshapes, ``weights.json``, ``history.json``,
   ``inputs.json`` (``facebasis verify OUT/rig`` certifies its weights) and ``rig.glb`` (glTF 2.0,
   one morph target per blendshape)

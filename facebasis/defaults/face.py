@@ -10,7 +10,7 @@ is a front mask in centimetres (about 14 cm wide and 18 cm high) built on a (u, 
   up behind the upper lip and down behind the lower lip, and a shallow eye socket;
 * the lips nearly touch (0.6 mm gap) with the socket 5-8 mm behind them, and the lids are 6-9 mm
   apart: exactly the thin multi-layer regions where deformation transfer can push one layer
-  through another (seed 004).
+  through another (Li et al. 2023).
 
 Two people share the topology: :func:`default_template` (the generic rig) and
 :func:`default_person` (a different face shape with its own, person-specific expressions: other

@@ -2,12 +2,20 @@
 
 Given target edge vectors ``e*`` for every triangle edge, find per-vertex values ``d`` minimising
 
-    sum_t sum_e  c_t || (E d)_{t,e} - e*_{t,e} ||^2        (seed 000 sec. 2.2, last step of eq. 4)
+    sum_t sum_e  c_t || (E d)_{t,e} - e*_{t,e} ||^2        (Gao et al. 2015, sec. 2.2, last step of eq. 4)
 
 with ``d`` fixed at anchor vertices. Edges only determine ``d`` up to one translation per connected
 component, so anchors are required (``method.md``: every component must be anchored, or whole parts
 drift). The normal matrix ``L = E^T C E`` restricted to the free vertices is factored once; every
 later call solves all right-hand sides (shapes x 3 coordinates) in one back-substitution.
+
+References
+----------
+- Sumner R. W., Popovic J. Deformation transfer for triangle meshes. ACM Transactions on Graphics
+    23(3) (SIGGRAPH 2004): 399-405.
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations

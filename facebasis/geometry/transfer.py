@@ -1,7 +1,7 @@
 """Deformation transfer of a blendshape rig onto a new neutral (Sumner & Popovic 2004).
 
 For template shape i the per-triangle deformation gradient is ``Q_i = A_i^S (A_0^S)^-1``
-(Sumner & Popovic eq. 4; seed 000 eq. 3 writes the transferred target frame as
+(Sumner & Popovic eq. 4; Gao et al. 2015, eq. 3 writes the transferred target frame as
 ``A~_i = Q_i A_0^B``). The target shape is the mesh whose triangle edges best match the
 transferred edges ``Q_i e^B`` in least squares, with the translation fixed at anchor vertices:
 
@@ -9,6 +9,14 @@ transferred edges ``Q_i e^B`` in least squares, with the translation fixed at an
     d[a] = S_i[a] - S_0[a]  at the anchors a (still vertices of the template).
 
 Solving for the delta ``d`` rather than the positions keeps still regions exactly still.
+
+References
+----------
+- Sumner R. W., Popovic J. Deformation transfer for triangle meshes. ACM Transactions on Graphics
+    23(3) (SIGGRAPH 2004): 399-405.
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations
@@ -162,7 +170,7 @@ def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None
     template : Rig with neutral ``S_0`` (n, 3), faces (m, 3) and deltas (k, n, 3)
     target_neutral : (n, 3) ``B_0``, same topology and vertex order
     anchors : optional anchor vertices fixing each component's translation
-    virtual_edges, virtual_weight, virtual_mode : optional virtual-edge energy (seed 004), see
+    virtual_edges, virtual_weight, virtual_mode : optional virtual-edge energy (Li et al. 2023), see
         :class:`DeformationTransfer`
 
     Returns

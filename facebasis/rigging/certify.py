@@ -1,4 +1,4 @@
-"""Certified global optima of the weight subproblem (seed 000, eq. 5) by branch and bound.
+"""Certified global optima of the weight subproblem (Gao et al. 2015, eq. 5) by branch and bound.
 
 Given the blendshapes, the examples of eq. 5 are independent. For one example the problem is
 
@@ -24,6 +24,12 @@ certificate: ``lower_bound <= f* <= objective`` with ``objective - lower_bound <
 Each box-QP is solved by DAQP (Arnström, Bemporad & Axehill 2022, an exact dual active-set
 method, MIT licence) and then refined on its active set with one dense linear solve, so bounds
 hold exactly and the KKT residual is at rounding level; the residual is reported.
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations

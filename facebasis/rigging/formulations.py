@@ -1,4 +1,4 @@
-"""IPOPT formulations of the complementarity constraints of eq. 5 (seed 000), for comparison.
+"""IPOPT formulations of the complementarity constraints of eq. 5 (Gao et al. 2015), for comparison.
 
 One example's weight problem (see :mod:`facebasis.rigging.certify`)
 
@@ -20,6 +20,12 @@ lambda and its own parameter, and reused for every instance of the same size and
     1e-9 or rho = 1e8 (an exact penalty for MPCCs, Ralph & Wright 2004).
 
 The certified optimum from :func:`facebasis.rigging.certify.certified_weights` is the yardstick.
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations

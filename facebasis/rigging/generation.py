@@ -1,4 +1,4 @@
-"""Example-based facial blendshape generation (seed 000; digest: ``../shared/notes/method.md`` A).
+"""Example-based facial blendshape generation (Gao, Tan, Guo, Fan 2015; see References).
 
 Given a template rig ``S_0, S_1..S_k``, a target neutral ``B_0``, training expressions ``T_1..T_m``
 of the target and rough weights ``x~``, alternate
@@ -24,6 +24,14 @@ Units of ``w_i``: the paper's ``s_i = ||A_i^S||`` is a length, so ``w_i`` would 
 mesh's units (cm vs m). facebasis uses by default the scale-free relative edge change
 ``s_i = ||A_i^S||_F / ||A_0^S||_F`` over the frame's two edge columns (``weight_measure="relative"``);
 ``"absolute"`` gives the paper's literal, unit-dependent form.
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
+- Sumner R. W., Popovic J. Deformation transfer for triangle meshes. ACM Transactions on Graphics
+    23(3) (SIGGRAPH 2004): 399-405.
 """
 
 from __future__ import annotations
@@ -61,7 +69,7 @@ class GenerationProblem:
     initial_weights : (m, k) rough weights ``x~`` in [0, 1]
     example_names : m names (e.g. file stems)
     exclusive : pairs of shape names that are mutually exclusive (complementarity)
-    virtual_edges : optional :class:`~facebasis.contact.virtual_edges.VirtualEdges` (seed 004): their energy
+    virtual_edges : optional :class:`~facebasis.contact.virtual_edges.VirtualEdges` (Li et al. 2023): their energy
         joins every reconstruction of the basis step, with the deformation-transfer targets
     """
 
@@ -383,7 +391,7 @@ class BlendshapeGenerator:
                                                                                                   m_tri))  # (6, m_tri, k)
         self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
                                                              opts.sigma, opts.weight_measure))  # (m_tri, k)
-        # virtual-edge targets (seed 004) of every shape, from the template as in deformation transfer:
+        # virtual-edge targets (Li et al. 2023) of every shape, from the template as in deformation transfer:
         # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
         vc = self.dt.virtual_edge_cols(frame_deltas=dA)
         self.virtual_rows = None if vc is None else np.ascontiguousarray(
@@ -487,7 +495,7 @@ def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndar
 
 def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions | None = None,
                          progress=None) -> GenerationResult:
-    """Example-based blendshape generation (seed 000): precompute, alternate, return the result."""
+    """Example-based blendshape generation (Gao et al. 2015): precompute, alternate, return the result."""
     gen = BlendshapeGenerator(problem, options)
     res = gen.run(progress)
     return res

@@ -3,7 +3,7 @@
 A ``facebasis rig`` output folder holds the generated blendshapes (``neutral.obj`` + one OBJ per
 shape), the solved weights (``weights.json``) and ``inputs.json``, which records where the
 training expressions and rough weights came from, the exclusive pairs and the final lambda. The
-last weight step of the run solved eq. 5 of seed 000 for exactly these blendshapes, so every
+last weight step of the run solved eq. 5 of Gao et al. 2015 for exactly these blendshapes, so every
 stored weight vector should be the global optimum of its example's problem
 
     min_x ||B x - t_j||^2 + lambda ||x - x~_j||^2,   0 <= x <= 1,   x_a x_b = 0.
@@ -11,6 +11,12 @@ stored weight vector should be the global optimum of its example's problem
 This module recomputes the Gram data from the meshes on disk, solves each example with
 :func:`facebasis.rigging.certify.certified_weights`, and reports per example the objective gap of the
 stored weights, their complementarity and bound residuals and a verdict.
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The weight step of example-based generation (seed 000, eq. 5), in CasADi, solved by IPOPT.
+"""The weight step of example-based generation (Gao et al. 2015, eq. 5), in CasADi, solved by IPOPT.
 
 For training expressions j = 1..m with target deltas ``t_j = T_j - B_0`` (3n,) and blendshape
 deltas ``B`` (3n, k), find weights ``x_j`` (k,) minimising
@@ -18,6 +18,12 @@ the pairs, seeded with IPOPT's branch, every box-QP solved exactly. The polished
 the bounds and every complementarity constraint exactly, is a certified global optimum of each
 example's problem and is never worse than IPOPT's; IPOPT's status, its raw answer and the
 certificate (nodes, gap, KKT residual) are all reported.
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,virtual,all} [--repeat N]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,virtual,cli,all} [--repeat N]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -242,13 +242,22 @@ def bench_virtual(repeat: int) -> dict:
     return results
 
 
-BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights, "virtual": bench_virtual}
+def bench_cli(repeat: int, facex: str | None = None) -> dict:
+    from problems.bench_cli import bench_cli as run
+
+    return run(repeat, facex)
+
+
+BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights, "virtual": bench_virtual,
+           "cli": bench_cli}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m problems.bench")
     parser.add_argument("which", nargs="?", default="all", choices=sorted(BENCHES) + ["all"])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--facex", default=None, metavar="DIR",
+                        help="cli: also time ICT-FaceKit's raw FaceXModel folder (as it ships) onto identity003")
     args = parser.parse_args(argv)
     from problems.ict import ict_available, ict_path
 
@@ -257,7 +266,10 @@ def main(argv=None) -> int:
         return 2
     print(f"machine: {_machine()}")
     for name in (sorted(BENCHES) if args.which == "all" else [args.which]):
-        BENCHES[name](args.repeat)
+        if name == "cli":
+            bench_cli(args.repeat, args.facex)
+        else:
+            BENCHES[name](args.repeat)
     return 0
 
 

@@ -1,4 +1,10 @@
-"""Atomic outputs: a failed run leaves no half-written file or folder behind."""
+"""Atomic outputs: a failed or interrupted run leaves no half-written file or folder behind.
+
+Outputs get the permissions an ordinary ``open``/``mkdir`` would give under the process's umask
+(temporary files are created private, then opened up before they are renamed into place). Staging
+folders carry the writing process's id; one left behind by a process that no longer runs (killed
+with SIGKILL, power loss) is removed the next time the same output is written.
+"""
 
 from __future__ import annotations
 
@@ -10,15 +16,55 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
+from .interrupt import deferred_interrupts
+
+
+def _read_umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: the process's umask, read once at import (reading it means setting it, which is not thread-safe)
+_UMASK = _read_umask()
+
+
+def _open_up(path: Path, directory: bool) -> None:
+    """Give a private temporary file or folder the mode ``open``/``mkdir`` would have given it."""
+    os.chmod(path, (0o777 if directory else 0o666) & ~_UMASK)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - someone else's process
+        return True
+    return True
+
+
+def _remove_stale(out: Path) -> None:
+    """Staging or swapped-out siblings of ``out`` left by processes that no longer run."""
+    for kind in ("partial", "old"):
+        for p in out.parent.glob(f".{out.name}.{kind}-*"):
+            try:
+                pid = int(p.name[len(f".{out.name}.{kind}-"):].split("-")[0])
+            except ValueError:
+                continue
+            if pid != os.getpid() and not _alive(pid):
+                shutil.rmtree(p, ignore_errors=True)
+
 
 @contextlib.contextmanager
 def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
     """Yield a fresh staging folder that replaces ``out_dir`` only if the block succeeds.
 
     The staging folder is a sibling of ``out_dir`` (same file system, so the final rename is
-    atomic). If the block raises, the staging folder is deleted and an existing ``out_dir`` is
-    left untouched. If it succeeds, an existing ``out_dir`` is moved aside, the new folder renamed
-    into place, and the old one removed.
+    atomic). If the block raises (an interrupt included), the staging folder is deleted and an
+    existing ``out_dir`` is left untouched. If it succeeds, an existing ``out_dir`` is moved aside,
+    the new folder renamed into place, and the old one removed, with SIGINT held back for those
+    steps: whenever an interrupt lands, either the old or the new folder is left, and nothing else.
     """
     out = Path(out_dir).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -26,17 +72,35 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
         from .errors import InputError
 
         raise InputError(f"output folder {out}: expected a folder or a new path, found a file")
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    _remove_stale(out)
+    stage = None
     try:
+        with deferred_interrupts():
+            stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+            _open_up(stage, directory=True)
         yield stage
+        with deferred_interrupts():
+            _swap_in(stage, out)
     except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
+        if stage is not None:
+            with deferred_interrupts():
+                shutil.rmtree(stage, ignore_errors=True)
         raise
+
+
+def _swap_in(stage: Path, out: Path) -> None:
+    """Replace ``out`` by ``stage``; on a failure half-way the old ``out`` is put back."""
     old = None
     if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
         os.replace(out, old / "x")
-    os.replace(stage, out)
+    try:
+        os.replace(stage, out)
+    except BaseException:
+        if old is not None:
+            os.replace(old / "x", out)
+            old.rmdir()
+        raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
 
@@ -44,15 +108,24 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary sibling and an atomic rename."""
     path = Path(path)
+    if path.is_dir():
+        from .errors import InputError
+
+        raise InputError(f"output file {path}: expected a file name, found a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    tmp = None
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with deferred_interrupts():
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+            fh = os.fdopen(fd, "wb")
+        with fh:
             fh.write(data)
+        _open_up(Path(tmp), directory=False)
         os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with deferred_interrupts(), contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
         raise
 
 

@@ -1,7 +1,9 @@
 """The ``facebasis`` command line: a thin layer over the library.
 
 Every user error is a :class:`~facebasis.errors.FacebasisError`: it is printed as ``error: ...``
-on stderr and the command exits with status 2. Outputs are written atomically.
+on stderr and the command exits with status 2. Outputs are written atomically. Ctrl-C stops any
+command at once, even inside IPOPT, prints one line and exits with status 130, leaving either the
+old output or none.
 
 One module per group of commands; each only parses, calls the library and prints:
 :mod:`.demo`, :mod:`.rigging` (transfer, rig, export, verify), :mod:`.contact` (virtual-edges,
@@ -48,6 +50,9 @@ def main(argv=None) -> int:
     except FacebasisError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"interrupted: facebasis {args.command} stopped; no output was written or replaced", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

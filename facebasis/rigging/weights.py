@@ -34,6 +34,7 @@ import numpy as np
 
 from .certify import CertifiedWeightSolver
 from ..errors import InputError, SolverError
+from ..interrupt import interruptible
 
 #: IPOPT return statuses that count as a successful solve.
 IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -185,7 +186,8 @@ class WeightSolver:
         args = {"x0": x0.ravel(), "p": p, "lbx": 0.0, "ubx": 1.0}
         if self.n_constraints:
             args.update(lbg=0.0, ubg=0.0)
-        sol = self._solver(**args)
+        with interruptible():  # IPOPT would turn Ctrl-C into a failure status and carry on
+            sol = self._solver(**args)
         stats = self._solver.stats()
         status = str(stats.get("return_status", "unknown"))
         iters = int(stats.get("iter_count", -1))

@@ -53,6 +53,7 @@ BASE = {
     "penetration": ["penetration", "m.obj"],
     "export": ["export", "R", "--out", "r.glb"],
     "verify": ["verify", "RUN"],
+    "retarget": ["retarget", "CAP", "--out", "o"],
 }
 
 

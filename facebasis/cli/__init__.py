@@ -7,7 +7,7 @@ old output or none.
 
 One module per group of commands; each only parses, calls the library and prints:
 :mod:`.demo`, :mod:`.rigging` (transfer, rig, export, verify), :mod:`.contact` (virtual-edges,
-penetration), :mod:`.report` (report, sweep).
+penetration), :mod:`.retarget` (animate2d, animate3d, retarget), :mod:`.report` (report, sweep).
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ import argparse
 import sys
 
 from ..errors import FacebasisError
-from . import contact, demo, report, rigging
+from . import contact, demo, report, retarget, rigging
 
 #: command groups, in the order their commands are listed by ``facebasis --help``
-GROUPS = (demo, rigging, contact, report)
+GROUPS = (demo, rigging, contact, retarget, report)
 
 
 DESCRIPTION = ("facebasis: personalised facial blendshape rigs (deformation transfer, example-based "

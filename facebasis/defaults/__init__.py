@@ -2,6 +2,8 @@
 
 Modules
 -------
-face     the generated 3D face: a template rig and a second person
-demo     ``facebasis demo``: the main job on the built-in face (sits on top, like the CLI)
+face            the generated 3D face: a template rig and a second person
+face_landmarks  68 landmark vertices of the built-in face (iBUG order), to drive it from video
+cartoon         a generated cartoon face image with its 68 landmarks, to animate from video
+demo            ``facebasis demo``: the main job on the built-in face (sits on top, like the CLI)
 """

@@ -1,0 +1,93 @@
+"""Command-line commands of expression reproduction: animate2d, animate3d, retarget.
+
+``register(subparsers)`` adds them to the ``facebasis`` command; the handlers only parse, call
+:mod:`facebasis.retarget.pipeline` and print.
+"""
+
+from __future__ import annotations
+
+
+
+def cmd_animate2d(args) -> int:
+    from ..retarget.pipeline import run_animate2d
+
+    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, log=print)
+    beside = f", beside {s['video_beside']}" if s["video_beside"] else ""
+    print(f"animated {s['frames']} frames ({s['warp_ms_per_frame']:.1f} ms per frame warp{beside}) -> {args.out}")
+    return 0
+
+
+def cmd_animate3d(args) -> int:
+    from ..retarget.pipeline import run_animate3d
+
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print)
+    print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
+    return 0
+
+
+def cmd_retarget(args) -> int:
+    from ..retarget.pipeline import run_retarget
+
+    s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
+                     neutral=args.neutral, first_frame_neutral=args.first_frame_neutral, log=print)
+    print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
+          f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``animate2d``, ``animate3d`` and ``retarget`` to an argparse sub-parser collection."""
+    p = subparsers.add_parser(
+        "animate2d", help="animate a single cartoon image with a tracked face video",
+        description="Place the tracked face mesh on a cartoon image (radial basis functions trained on the "
+                    "landmarks) and warp the image triangle by triangle for every frame. Writes cartoon.mp4 "
+                    "(beside the source video when the capture folder records it), cartoon.gif and "
+                    "cartoon_mesh.npz.")
+    p.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder with track.npz")
+    p.add_argument("--image", default=None, metavar="CARTOON.png",
+                   help="cartoon image (default: the built-in cartoon face)")
+    p.add_argument("--landmarks", default=None, metavar="CARTOON.pts",
+                   help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_animate2d)
+
+    p = subparsers.add_parser(
+        "animate3d", help="drive a 3D face mesh with a tracked face video",
+        description="Move the mesh's landmark vertices by the tracked landmark motion (in the mesh's x-y "
+                    "plane, scaled to the mesh) and deform the rest smoothly. Writes frames.npz and an "
+                    "animated animation.glb.")
+    p.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder with track.npz")
+    p.add_argument("--mesh", default=None, metavar="FACE.obj",
+                   help="target mesh facing +z with y up (default: the built-in face)")
+    p.add_argument("--landmarks", default=None, metavar="INDICES.json",
+                   help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_animate3d)
+
+    p = subparsers.add_parser(
+        "retarget", help="blendshape weights and head pose of a rig for every frame of a tracked video",
+        description="Fit, frame by frame, the rig's weights (between 0 and 1, exclusive pairs never both "
+                    "active, smooth over time) and a weak-perspective head pose to the tracked landmarks. "
+                    "Writes weights.csv, weights.json, pose.csv and an animated animation.glb.")
+    p.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder with track.npz")
+    p.add_argument("--rig", default=None, metavar="RIG_DIR",
+                   help="rig folder (neutral + one mesh per blendshape), or 'default' for the built-in face "
+                        "(the default)")
+    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the rig folder")
+    p.add_argument("--landmarks", default=None, metavar="INDICES.json",
+                   help="JSON list of the rig's vertex indices, one per capture landmark (needed with a rig folder)")
+    p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
+                   help="shape pairs that are never active together; give several after one flag "
+                        "(--exclusive A:B C:D) or repeat the flag (default: none for a rig folder, the "
+                        "built-in face's own pairs for the built-in face)")
+    p.add_argument("--smooth", type=float, default=None, metavar="S",
+                   help="temporal smoothness: weight of the change from the previous frame (default 0.05; 0 "
+                        "solves every frame on its own)")
+    p.add_argument("--first-frame-neutral", action="store_true",
+                   help="the first frame shows the neutral face: adapt the rig's landmark positions to it, so "
+                        "differences between the tracked face's shape and the rig's are not read as expression")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=cmd_retarget)
+
+
+__all__ = ["register", "cmd_animate2d", "cmd_animate3d", "cmd_retarget"]

@@ -1,0 +1,34 @@
+"""Expression reproduction: drive a cartoon image, a 3D mesh or a blendshape rig with a tracked face.
+
+Method (Wu & Ju, "Markerless facial expression capture and reproduction", Acta Electronica Sinica,
+2016(9), reproduction part, eq. 10-13): a multiquadric radial basis function network trained on the
+landmark pairs places the capture's first-frame mesh on the target (eq. 10-11); the captured
+displacements, scaled by the ratio of the two meshes' mean edge lengths (eq. 12-13), move the
+target. In 2D the cartoon image is warped triangle by triangle with bilinear interpolation; in 3D
+the target's landmark vertices are moved and the rest follows a smooth (biharmonic, factor-once)
+deformation. Beyond the paper, the landmarks also drive a blendshape rig: per-frame weights
+(bounds, exclusive pairs solved to a certified optimum, temporal smoothness) with a weak-perspective
+head pose.
+
+Modules
+-------
+capture    the capture folder (``track.npz``) as consumed here, and a writer for tests
+rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
+warp2d     vectorised piecewise-affine warp of a cartoon image (:class:`CartoonAnimator`)
+drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
+rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`), identifiability
+animation  GLB with morph targets and a glTF weight animation
+synthetic  synthetic captures with known weights and pose (tests, benchmark)
+files      landmark/index/image input files; media: MP4 (PyAV) and GIF output
+pipeline   the three command-line jobs as library calls (checked inputs, atomic output folders)
+"""
+
+from .animation import animated_glb_bytes, write_rig_animation
+from .drive3d import MeshAnimation, MeshDriver, drive_mesh
+from .rbf import RBFMap, edge_length_ratio, fit_rbf
+from .rigdrive import RetargetResult, RigRetargeter, identifiability, retarget_landmarks
+from .warp2d import CartoonAnimation, CartoonAnimator, animate_cartoon
+
+__all__ = ["RBFMap", "fit_rbf", "edge_length_ratio", "CartoonAnimator", "CartoonAnimation", "animate_cartoon",
+           "MeshDriver", "MeshAnimation", "drive_mesh", "RigRetargeter", "RetargetResult", "retarget_landmarks",
+           "identifiability", "animated_glb_bytes", "write_rig_animation"]

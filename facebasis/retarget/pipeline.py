@@ -1,0 +1,246 @@
+"""The three retargeting jobs as library calls (read, check everything, compute, write atomically).
+
+Each ``run_*`` checks every input before any computation and writes its output folder through
+:func:`facebasis.atomic.atomic_directory`, so a failed run leaves no folder behind. They return a
+small summary dict (also written as ``summary.json``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
+from ..errors import InputError
+from .capture import read_capture_folder
+
+
+def _log(log, text):
+    if log is not None:
+        log(text)
+
+
+# ----------------------------------------------------------------------------------------------
+# 2D
+
+def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds: float = 4.0, log=None) -> dict:
+    """Animate a cartoon image (default: the built-in cartoon) by a capture folder.
+
+    Writes ``cartoon.mp4`` (the source video's frames beside the cartoon when the capture records
+    its video), ``cartoon.gif`` (the first ``gif_seconds``), ``cartoon_mesh.npz`` (vertices (T, N, 2),
+    faces), ``cartoon_rest.png`` and ``summary.json``.
+    """
+    from .files import read_image, read_points2d
+    from .media import read_video_frames, side_by_side, write_gif, write_mp4
+    from .warp2d import CartoonAnimator
+
+    cap = read_capture_folder(capture_dir)
+    if (image is None) != (landmarks is None):
+        raise InputError("--image and --landmarks: expected both (a cartoon and its landmarks) or neither "
+                         "(the built-in cartoon), found only one")
+    if image is None:
+        from ..defaults.cartoon import default_cartoon
+
+        face = default_cartoon()
+        img, pts, what = np.array(face.image), np.array(face.landmarks), "the built-in cartoon (68 iBUG landmarks)"
+        if cap.n_landmarks != len(pts):
+            raise InputError(f"cartoon landmarks: expected {cap.n_landmarks} points (the capture's count), found "
+                             f"{len(pts)} on the built-in cartoon; give --image and --landmarks")
+    else:
+        pts = read_points2d(landmarks)
+        if len(pts) != cap.n_landmarks:
+            raise InputError(f"cartoon landmark file {landmarks}: expected {cap.n_landmarks} points (the capture's "
+                             f"count), found {len(pts)}")
+        img, what = read_image(image), str(image)
+    t0 = time.perf_counter()
+    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces)
+    meshes = anim.mesh(cap.vertices)
+    _log(log, f"cartoon: {what}, {img.shape[1]}x{img.shape[0]}; capture {cap.n_frames} frames, "
+              f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}")
+    video = cap.video
+    gif_frames, warp_seconds = [], 0.0
+
+    def frames():
+        nonlocal warp_seconds
+        src = read_video_frames(video) if video is not None else None
+        for f in range(cap.n_frames):
+            t1 = time.perf_counter()
+            out = anim.warp(meshes[f])
+            warp_seconds += time.perf_counter() - t1
+            if len(gif_frames) <= gif_seconds * cap.fps:
+                gif_frames.append(out)
+            if src is not None:
+                left = next(src, None)
+                if left is not None:
+                    out = side_by_side(left, out)
+            yield out
+
+    with atomic_directory(out_dir) as stage:
+        n = write_mp4(stage / "cartoon.mp4", frames(), cap.fps)
+        write_gif(stage / "cartoon.gif", gif_frames, cap.fps, gif_seconds)
+        np.savez(stage / "cartoon_mesh.npz", vertices=meshes.astype(np.float32), faces=anim.faces,
+                 rest=anim.rest, fps=np.float64(cap.fps))
+        import cv2
+
+        cv2.imwrite(str(stage / "cartoon_rest.png"), np.ascontiguousarray(img[..., ::-1]))
+        summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c,
+                   "video_beside": str(video) if video is not None else None,
+                   "warp_ms_per_frame": 1e3 * warp_seconds / max(n, 1), "seconds": time.perf_counter() - t0}
+        atomic_write_json(stage / "summary.json", summary)
+    return summary
+
+
+# ----------------------------------------------------------------------------------------------
+# 3D
+
+def _default_face_mesh():
+    from ..defaults.face import default_template
+    from ..defaults.face_landmarks import face_landmarks
+
+    rig = default_template()
+    return rig.neutral, rig.faces, face_landmarks()
+
+
+def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> dict:
+    """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
+    (T, n, 3), faces), ``animation.glb`` (see :meth:`MeshDriver.morph_basis`) and ``summary.json``."""
+    from ..geometry.meshio import read_mesh
+    from .animation import animated_glb_bytes, frame_times
+    from .drive3d import MeshDriver
+    from .files import read_indices
+    from .rigdrive import check_landmark_indices
+
+    cap = read_capture_folder(capture_dir)
+    if mesh is None:
+        V, F, idx = _default_face_mesh()
+        if landmarks is not None:
+            idx = read_indices(landmarks)
+        name = "the built-in face"
+    else:
+        if landmarks is None:
+            raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
+                             f"found none")
+        V, F = read_mesh(mesh)
+        idx = read_indices(landmarks)
+        name = str(mesh)
+    idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
+                                 f"landmark index file {landmarks}" if landmarks else "landmark indices")
+    t0 = time.perf_counter()
+    driver = MeshDriver(V, F, idx, cap.landmarks[0], cap.vertices[0], cap.faces)
+    anim = driver.run(cap.landmarks, cap.fps)
+    targets, names, weights = driver.morph_basis(cap.landmarks)
+    glb_error = driver.morph_error(cap.landmarks, targets, weights)
+    _log(log, f"mesh: {name}, {len(V)} vertices; {cap.n_frames} frames; eq. 13 scale {driver.scale:.4g}; "
+              f"factorised in {driver.setup_seconds:.2f} s; animation: {len(names)} morph targets "
+              f"(largest vertex error {glb_error:.3g} mesh units)")
+    with atomic_directory(out_dir) as stage:
+        np.savez(stage / "frames.npz", vertices=anim.vertices.astype(np.float32), faces=anim.faces,
+                 indices=idx, fps=np.float64(cap.fps))
+        atomic_write_bytes(stage / "animation.glb",
+                           animated_glb_bytes(V, F, targets, names, frame_times(cap.n_frames, cap.fps), weights))
+        summary = {"frames": cap.n_frames, "fps": cap.fps, "vertices": len(V), "scale_eq13": driver.scale,
+                   "morph_targets": len(names), "animation_max_vertex_error": glb_error,
+                   "seconds": time.perf_counter() - t0,
+                   "z": "unchanged (monocular capture: in-plane motion only)"}
+        atomic_write_json(stage / "summary.json", summary)
+    return summary
+
+
+# ----------------------------------------------------------------------------------------------
+# rig
+
+def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_landmarks: int | None = None):
+    """(rig, landmark indices, default exclusive pairs) for ``--rig`` (None/"default": built-in face)."""
+    from ..geometry.rig import load_rig_folder
+    from .files import read_indices
+    from .rigdrive import check_landmark_indices
+
+    if rig is None or str(rig) == "default":
+        from ..defaults.face import EXCLUSIVE_PAIRS, default_template
+        from ..defaults.face_landmarks import face_landmarks
+
+        r = default_template()
+        idx = face_landmarks() if landmarks is None else read_indices(landmarks)
+        default_pairs = EXCLUSIVE_PAIRS
+    else:
+        if landmarks is None:
+            raise InputError(f"--landmarks: expected a JSON file of vertex indices of rig {rig}, found none")
+        r = load_rig_folder(rig, neutral)
+        idx = read_indices(landmarks)
+        default_pairs = ()
+    n = len(idx) if n_landmarks is None else n_landmarks
+    idx = check_landmark_indices(idx, r.n_vertices, n,
+                                 f"landmark index file {landmarks}" if landmarks else "built-in face landmarks")
+    return r, idx, default_pairs
+
+
+def weights_csv(names, weights) -> bytes:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", *names])
+    for f, row in enumerate(np.asarray(weights)):
+        w.writerow([f, *(f"{v:.6f}" for v in row)])
+    return buf.getvalue().encode()
+
+
+def pose_csv(result) -> bytes:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "time_s", "scale_px_per_unit", "rot_x_rad", "rot_y_rad", "rot_z_rad", "tx_px", "ty_px",
+                "residual_px"])
+    rv = result.rotation_vectors()
+    for f in range(result.n_frames):
+        w.writerow([f, f"{f / result.fps:.6f}", f"{result.scale[f]:.6f}", *(f"{v:.6f}" for v in rv[f]),
+                    *(f"{v:.4f}" for v in result.translation[f]), f"{result.residual[f]:.4f}"])
+    return buf.getvalue().encode()
+
+
+def write_retarget_outputs(stage: Path, rig, result, pairs_named, extra: dict | None = None) -> dict:
+    """``weights.csv``, ``weights.json``, ``pose.csv``, ``animation.glb``, ``summary.json`` into ``stage``."""
+    from .animation import write_rig_animation
+
+    atomic_write_bytes(stage / "weights.csv", weights_csv(result.names, result.weights))
+    atomic_write_json(stage / "weights.json", {"fps": result.fps, "names": list(result.names),
+                                               "weights": np.round(result.weights, 6).tolist()})
+    atomic_write_bytes(stage / "pose.csv", pose_csv(result))
+    write_rig_animation(stage / "animation.glb", rig, np.clip(result.weights, 0.0, 1.0), result.fps)
+    summary = {"frames": result.n_frames, "fps": result.fps, "shapes": rig.n_shapes,
+               "exclusive": [f"{a}:{b}" for a, b in pairs_named],
+               "residual_px_mean": float(np.nanmean(result.residual)),
+               "residual_px_max": float(np.nanmax(result.residual)),
+               "ms_per_frame": 1e3 * result.seconds / max(result.n_frames, 1), **(extra or {})}
+    atomic_write_json(stage / "summary.json", summary)
+    return summary
+
+
+def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
+                 neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool = False,
+                 log=None) -> dict:
+    """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`)."""
+    from ..rigging.examples import parse_pairs
+    from .rigdrive import DEFAULT_RIDGE, DEFAULT_SMOOTH, RigRetargeter, resolve_pairs
+
+    cap = read_capture_folder(capture_dir)
+    r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
+    named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
+    resolve_pairs(r, named)                           # unknown names: RigError, before any work
+    smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
+    ridge = DEFAULT_RIDGE if ridge is None else float(ridge)
+    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, first_frame_neutral=first_frame_neutral)
+    _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
+              f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
+         + f"; smooth {smooth:g}, ridge {ridge:g}")
+    result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
+    with atomic_directory(out_dir) as stage:
+        summary = write_retarget_outputs(stage, r, result, named, {"smooth": smooth, "ridge": ridge,
+                                                                    "solver": solver,
+                                                                    "first_frame_neutral": first_frame_neutral})
+    return summary
+
+
+__all__ = ["run_animate2d", "run_animate3d", "run_retarget", "load_retarget_rig", "write_retarget_outputs",
+           "weights_csv", "pose_csv"]

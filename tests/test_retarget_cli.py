@@ -1,0 +1,194 @@
+"""The animate2d / animate3d / retarget commands: outputs, and every input error before any work."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from facebasis.defaults.cartoon import default_cartoon
+from facebasis.defaults.face import default_template
+from facebasis.defaults.face_landmarks import face_landmarks
+from facebasis.geometry.meshio import write_mesh
+from facebasis.geometry.rig import write_rig_folder
+from facebasis.retarget.capture import write_capture_folder
+from facebasis.retarget.files import write_pts
+from facebasis.retarget.synthetic import smooth_weight_curves, synthetic_capture
+
+
+def _main():
+    from facebasis.cli import main
+
+    return main
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    rig = default_template()
+    X = smooth_weight_curves(rig.names, ("jawOpen", "mouthSmile_L", "eyeBlink_L", "browInnerUp"), 24, seed=2)
+    cap = synthetic_capture(rig, face_landmarks(), X, noise_px=0.2, seed=2)
+    folder = tmp_path_factory.mktemp("cli") / "capture"
+    write_capture_folder(folder, cap.landmarks, fps=cap.fps, size=cap.size)
+    return folder, X
+
+
+def run(argv, capsys):
+    code = _main()(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_retarget_default_face(capture, tmp_path, capsys):
+    folder, X = capture
+    out = tmp_path / "rt"
+    code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--smooth", "0.01"], capsys)
+    assert code == 0, stdout
+    rows = list(csv.reader((out / "weights.csv").open()))
+    assert rows[0] == ["frame", *default_template().names]
+    assert len(rows) == 1 + len(X)
+    W = np.array([[float(v) for v in r[1:]] for r in rows[1:]])
+    assert np.all((W >= 0) & (W <= 1))
+    assert np.abs(W[:, 0] - X[:, 0]).max() < 0.05           # jawOpen, the best-seen shape
+    data = json.loads((out / "weights.json").read_text())
+    assert data["names"][0] == "jawOpen" and len(data["weights"]) == len(X)
+    pose = list(csv.reader((out / "pose.csv").open()))
+    assert pose[0][:3] == ["frame", "time_s", "scale_px_per_unit"] and len(pose) == 1 + len(X)
+    assert (out / "animation.glb").stat().st_size > 0
+
+
+def test_retarget_rig_folder_with_exclusive_pairs(capture, tmp_path, capsys):
+    folder, X = capture
+    rig = default_template()
+    rig_dir = tmp_path / "rig"
+    write_rig_folder(rig_dir, rig)
+    idx = tmp_path / "idx.json"
+    idx.write_text(json.dumps(face_landmarks().tolist()))
+    out = tmp_path / "rt"
+    code, stdout, err = run(["retarget", str(folder), "--rig", str(rig_dir), "--landmarks", str(idx), "--out", str(out),
+                             "--exclusive", "mouthLeft:mouthRight", "eyeBlink_L:eyeWide_L",
+                             "--exclusive", "eyeBlink_R:eyeWide_R"], capsys)
+    assert code == 0, err
+    assert "3 exclusive pairs" in stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exclusive"] == ["mouthLeft:mouthRight", "eyeBlink_L:eyeWide_L", "eyeBlink_R:eyeWide_R"]
+
+
+def test_animate2d_default_cartoon(capture, tmp_path, capsys):
+    folder, _ = capture
+    out = tmp_path / "a2"
+    code, stdout, err = run(["animate2d", str(folder), "--out", str(out)], capsys)
+    assert code == 0, err
+    for name in ("cartoon.mp4", "cartoon.gif", "cartoon_mesh.npz"):
+        assert (out / name).stat().st_size > 0
+    with np.load(out / "cartoon_mesh.npz") as d:
+        assert d["vertices"].shape == (24, 68, 2) and d["faces"].shape[1] == 3
+    from facebasis.retarget.media import read_video_frames
+
+    frames = list(read_video_frames(out / "cartoon.mp4"))
+    assert len(frames) == 24 and frames[0].shape == (512, 512, 3)
+
+
+def test_animate2d_own_image(capture, tmp_path, capsys):
+    import cv2
+
+    folder, _ = capture
+    face = default_cartoon(256)
+    img = tmp_path / "toon.png"
+    cv2.imwrite(str(img), np.ascontiguousarray(face.image[..., ::-1]))
+    pts = tmp_path / "toon.pts"
+    write_pts(pts, face.landmarks)
+    out = tmp_path / "a2"
+    code, _, err = run(["animate2d", str(folder), "--image", str(img), "--landmarks", str(pts), "--out", str(out)],
+                       capsys)
+    assert code == 0, err
+    assert (out / "cartoon.mp4").is_file()
+
+
+def test_animate3d(capture, tmp_path, capsys):
+    folder, _ = capture
+    rig = default_template()
+    mesh = tmp_path / "face.obj"
+    write_mesh(mesh, rig.neutral, rig.faces)
+    idx = tmp_path / "idx.json"
+    idx.write_text(json.dumps({"indices": face_landmarks().tolist()}))
+    out = tmp_path / "a3"
+    code, _, err = run(["animate3d", str(folder), "--mesh", str(mesh), "--landmarks", str(idx), "--out", str(out)],
+                       capsys)
+    assert code == 0, err
+    with np.load(out / "frames.npz") as d:
+        V = d["vertices"]
+        assert V.shape == (24, rig.n_vertices, 3)
+        np.testing.assert_allclose(V[0], rig.neutral, atol=1e-5)            # frame 0 is the rest pose
+        np.testing.assert_allclose(V[:, :, 2], np.broadcast_to(rig.neutral[:, 2], V.shape[:2]), atol=1e-5)
+        assert np.abs(V[5] - V[0]).max() > 0.01
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(out / "animation.glb"))
+    assert g.animations[0].channels[0].target.path == "weights"
+    assert g.accessors[g.animations[0].samplers[0].input].count == 24
+
+
+# ---------------------------------------------------------------------------------------------
+# every error: one line, before any work, no output folder
+
+def _fails(argv, match, capsys, out):
+    code, _, err = run(argv, capsys)
+    assert code == 2
+    assert err.startswith("error: ") and err.count("\n") == 1
+    assert match in err, err
+    assert not out.exists()
+    assert not list(out.parent.glob(f".{out.name}*"))
+
+
+def test_errors(capture, tmp_path, capsys):
+    folder, _ = capture
+    out = tmp_path / "out"
+    rig = default_template()
+    # landmark index file of the wrong length, and out of range
+    short = tmp_path / "short.json"
+    short.write_text(json.dumps(list(range(60))))
+    far = tmp_path / "far.json"
+    far.write_text(json.dumps([*range(67), rig.n_vertices + 5]))
+    mesh = tmp_path / "face.obj"
+    write_mesh(mesh, rig.neutral, rig.faces)
+    _fails(["retarget", str(folder), "--landmarks", str(short), "--out", str(out)],
+           "expected 68 indices (one per capture landmark), found 60", capsys, out)
+    _fails(["animate3d", str(folder), "--mesh", str(mesh), "--landmarks", str(far), "--out", str(out)],
+           f"expected vertex indices in [0, {rig.n_vertices})", capsys, out)
+    # capture folder without track.npz
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    for cmd in ("retarget", "animate2d", "animate3d"):
+        _fails([cmd, str(empty), "--out", str(out)], "track.npz", capsys, out)
+    # cartoon landmark count != capture's
+    face = default_cartoon(128)
+    import cv2
+
+    img = tmp_path / "toon.png"
+    cv2.imwrite(str(img), np.ascontiguousarray(face.image[..., ::-1]))
+    pts = tmp_path / "toon.json"
+    pts.write_text(json.dumps(face.landmarks[:50].tolist()))
+    _fails(["animate2d", str(folder), "--image", str(img), "--landmarks", str(pts), "--out", str(out)],
+           "expected 68 points (the capture's count), found 50", capsys, out)
+    # unreadable image
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not an image")
+    pts.write_text(json.dumps(face.landmarks.tolist()))
+    _fails(["animate2d", str(folder), "--image", str(bad), "--landmarks", str(pts), "--out", str(out)],
+           "OpenCV cannot read", capsys, out)
+    # unknown shape names in --exclusive
+    _fails(["retarget", str(folder), "--exclusive", "jawOpen:smileBig", "--out", str(out)],
+           "unknown blendshape names ['smileBig']", capsys, out)
+    _fails(["retarget", str(folder), "--exclusive", "jawOpen", "--out", str(out)],
+           "expected SHAPE_A:SHAPE_B", capsys, out)
+    # --image without --landmarks; rig folder without --landmarks
+    _fails(["animate2d", str(folder), "--image", str(img), "--out", str(out)], "expected both", capsys, out)
+
+
+def test_existing_output_survives_a_failed_run(capture, tmp_path, capsys):
+    folder, _ = capture
+    out = tmp_path / "keep"
+    out.mkdir()
+    (out / "old.txt").write_text("x")
+    code, _, _ = run(["retarget", str(folder), "--exclusive", "a:b", "--out", str(out)], capsys)
+    assert code == 2 and (out / "old.txt").read_text() == "x"

@@ -261,12 +261,14 @@ def _expressions(p: FaceParams, topo: _Topology, P: np.ndarray) -> np.ndarray:
     beyond = np.clip((np.abs(u) - corner_u) / 0.2, 0.0, 1.0)
     soft = 1.0 / (1.0 + np.exp((v - mouth_v + 0.04) / 0.05))
     jaw_w = (1.0 - beyond) * np.where(below, 1.0, 0.0) + beyond * soft
-    jaw_w = jaw_w * np.clip(1.0 - ((np.abs(u) - 0.55) / 0.4).clip(0), 0, 1)
+    side_fade = np.clip((np.abs(u) - 0.45) / 0.5, 0.0, 1.0)
+    jaw_w = jaw_w * (1.0 - side_fade * side_fade * (3.0 - 2.0 * side_fade))  # smooth fade to the cheeks
     jaw_w = jaw_w * np.where(mouth_slit & (topo.pocket > 0), np.clip(1.0 - 0.12 * topo.pocket, 0, 1), 1.0)
     jaw_w = np.where((topo.pocket > 0) & ~mouth_slit, 0.0, jaw_w)
     pivot = np.array([0.0, mouth_v * H + 2.0, -7.0])
     t = p.jaw_angle
-    R = np.array([[1, 0, 0], [0, np.cos(t), np.sin(t)], [0, -np.sin(t), np.cos(t)]])
+    # rotation about the x axis through the pivot behind the face: the chin goes down and back
+    R = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
     jaw = jaw_w[:, None] * ((P - pivot) @ R.T + pivot - P)
 
     mouth_region = _weight_from_grid(topo, lambda uu, vv: _bump(uu, vv, 0.0, mouth_v, 0.42, 0.16))

@@ -144,7 +144,8 @@ def ident_table(rig, idx):
 def cli_check(rig, idx, pairs, frames: int = 100, log=print) -> dict:
     """The `retarget` pipeline on a rig folder written in a temporary folder (never in the repo)."""
     from facebasis.geometry.rig import write_rig_folder
-    from facebasis.retarget.capture import write_capture_folder
+    from facebasis.capture.trackfile import write_capture
+    from facebasis.retarget.synthetic import capture_from_landmarks
     from facebasis.retarget.pipeline import run_retarget
 
     X = smooth_weight_curves(rig.names, [n for n in ICT_ACTIVE if n in rig.names] or rig.names[:3], frames, seed=3)
@@ -153,7 +154,7 @@ def cli_check(rig, idx, pairs, frames: int = 100, log=print) -> dict:
         tmp = Path(tmp)
         t0 = time.perf_counter()
         write_rig_folder(tmp / "rig", rig)
-        write_capture_folder(tmp / "capture", cap.landmarks, fps=cap.fps, size=cap.size)
+        write_capture(tmp / "capture", capture_from_landmarks(cap.landmarks, fps=cap.fps, size=cap.size))
         (tmp / "idx.json").write_text(json.dumps(np.asarray(idx).tolist()))
         s = run_retarget(tmp / "capture", tmp / "out", tmp / "rig", tmp / "idx.json",
                          [f"{a}:{b}" for a, b in pairs])

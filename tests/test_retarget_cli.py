@@ -11,9 +11,9 @@ from facebasis.defaults.face import default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.rig import write_rig_folder
-from facebasis.retarget.capture import write_capture_folder
+from facebasis.capture.trackfile import write_capture
 from facebasis.retarget.files import write_pts
-from facebasis.retarget.synthetic import smooth_weight_curves, synthetic_capture
+from facebasis.retarget.synthetic import capture_from_landmarks, smooth_weight_curves, synthetic_capture
 
 
 def _main():
@@ -28,7 +28,7 @@ def capture(tmp_path_factory):
     X = smooth_weight_curves(rig.names, ("jawOpen", "mouthSmile_L", "eyeBlink_L", "browInnerUp"), 24, seed=2)
     cap = synthetic_capture(rig, face_landmarks(), X, noise_px=0.2, seed=2)
     folder = tmp_path_factory.mktemp("cli") / "capture"
-    write_capture_folder(folder, cap.landmarks, fps=cap.fps, size=cap.size)
+    write_capture(folder, capture_from_landmarks(cap.landmarks, fps=cap.fps, size=cap.size))
     return folder, X
 
 

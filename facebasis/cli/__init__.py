@@ -7,7 +7,7 @@ old output or none.
 
 One module per group of commands; each only parses, calls the library and prints:
 :mod:`.demo`, :mod:`.rigging` (transfer, rig, export, verify), :mod:`.contact` (virtual-edges,
-penetration), :mod:`.retarget` (animate2d, animate3d, retarget), :mod:`.report` (report, sweep).
+penetration), :mod:`.capture` (capture), :mod:`.retarget` (animate2d, animate3d, retarget), :mod:`.report` (report, sweep).
 """
 
 from __future__ import annotations
@@ -16,15 +16,16 @@ import argparse
 import sys
 
 from ..errors import FacebasisError
-from . import contact, demo, report, retarget, rigging
+from . import capture, contact, demo, report, retarget, rigging
 
 #: command groups, in the order their commands are listed by ``facebasis --help``
-GROUPS = (demo, rigging, contact, retarget, report)
+GROUPS = (demo, rigging, contact, capture, retarget, report)
 
 
 DESCRIPTION = ("facebasis: personalised facial blendshape rigs (deformation transfer, example-based "
                "generation with certified weights), kept free of layer penetration (virtual edges, an exact "
-               "counter). Errors exit with status 2.")
+               "counter), driven from video (markerless capture, reproduction on cartoons, meshes and rigs). "
+               "Errors exit with status 2.")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -12,13 +12,15 @@ head pose.
 
 Modules
 -------
-capture    the capture folder (``track.npz``) as consumed here, and a writer for tests
 rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
 warp2d     vectorised piecewise-affine warp of a cartoon image (:class:`CartoonAnimator`)
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`), identifiability
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
+
+Captures are read with :func:`facebasis.capture.trackfile.read_capture` (the stated interface
+between the two halves of the method).
 files      landmark/index/image input files; media: MP4 (PyAV) and GIF output
 pipeline   the three command-line jobs as library calls (checked inputs, atomic output folders)
 """

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
 from ..errors import InputError
-from .capture import read_capture_folder
+from ..capture.trackfile import OVERLAY_FILE, read_capture
 
 
 def _log(log, text):
@@ -38,7 +38,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     from .media import read_video_frames, side_by_side, write_gif, write_mp4
     from .warp2d import CartoonAnimator
 
-    cap = read_capture_folder(capture_dir)
+    cap = read_capture(capture_dir)
     if (image is None) != (landmarks is None):
         raise InputError("--image and --landmarks: expected both (a cartoon and its landmarks) or neither "
                          "(the built-in cartoon), found only one")
@@ -61,7 +61,8 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     meshes = anim.mesh(cap.vertices)
     _log(log, f"cartoon: {what}, {img.shape[1]}x{img.shape[0]}; capture {cap.n_frames} frames, "
               f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}")
-    video = cap.video
+    overlay = Path(capture_dir) / OVERLAY_FILE  # the source video, or else the capture's overlay of it
+    video = cap.video if cap.video is not None else (overlay if overlay.is_file() else None)
     gif_frames, warp_seconds = [], 0.0
 
     def frames():
@@ -114,7 +115,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
-    cap = read_capture_folder(capture_dir)
+    cap = read_capture(capture_dir)
     if mesh is None:
         V, F, idx = _default_face_mesh()
         if landmarks is not None:
@@ -224,7 +225,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     from ..rigging.examples import parse_pairs
     from .rigdrive import DEFAULT_RIDGE, DEFAULT_SMOOTH, RigRetargeter, resolve_pairs
 
-    cap = read_capture_folder(capture_dir)
+    cap = read_capture(capture_dir)
     r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work

@@ -73,3 +73,17 @@ def synthetic_capture(rig: Rig, indices, weights, noise_px: float = 0.0, fps: fl
 
 
 __all__ = ["SyntheticCapture", "smooth_weight_curves", "head_motion", "synthetic_capture"]
+
+
+def capture_from_landmarks(landmarks, fps: float = 30.0, size=(512, 512), lost=None):
+    """A :class:`facebasis.capture.trackfile.Capture` whose tracked mesh is the landmarks themselves,
+    triangulated by Delaunay on the first frame (for synthetic captures: write it with
+    :func:`facebasis.capture.trackfile.write_capture`)."""
+    from scipy.spatial import Delaunay
+
+    from ..capture.trackfile import Capture
+
+    lm = np.asarray(landmarks, np.float64)
+    lost = np.zeros(lm.shape[:2], bool) if lost is None else np.asarray(lost, bool)
+    return Capture(lm, lm.copy(), Delaunay(lm[0]).simplices.astype(np.int64), float(fps),
+                   (int(size[0]), int(size[1])), lost)

@@ -1,0 +1,342 @@
+"""Stateful face tracker and the one-off :func:`capture` (Wu & Ju 2016, sec. 4).
+
+:class:`FaceTracker` is built once on the first frame (face mesh, harmonic factorisation of eq. 9,
+particle filter state, LK pyramid) and then advanced frame by frame with :meth:`FaceTracker.track`.
+:func:`capture` runs it over a video or image folder, streaming frames (memory does not grow with
+the video length except for the tracked coordinates themselves), and writes the output folder.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from facebasis.errors import InputError
+
+from .facemesh import FaceMesh, build_face_mesh
+from .harmonic import HarmonicDeformer
+from .landmarks import face_scale, lk_windows, read_landmarks, validate_landmarks
+from .lk import build_pyramid, lk_track
+from .meshtrack import MeshOptions, MeshRefiner, prepare_image
+from .particle import CondensationFilter, FilterOptions
+from .trackfile import OVERLAY_FILE, Capture, write_capture
+from .video import FrameSource, open_frames, to_gray
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Options of :class:`FaceTracker`.
+
+    Attributes
+    ----------
+    use_filter : bool
+        Stabilise LK with the CONDENSATION filter (False: raw LK, for comparison).
+    refine_mesh : bool
+        Run the Levenberg-Marquardt mesh tracking after the harmonic initialisation.
+    mesh_spacing : float or None
+        Mesh edge length in pixels (default: face width / 12).
+    lk_levels : int
+        Pyramid levels above the base image.
+    fb_threshold : float
+        Forward-backward error limit, pixels at reference face size.
+    windows : dict or None
+        Per-region LK windows ``{region: (width, height)}`` overriding
+        :data:`facebasis.capture.landmarks.DEFAULT_WINDOWS`.
+    filter : FilterOptions
+    mesh : MeshOptions
+    """
+
+    use_filter: bool = True
+    refine_mesh: bool = True
+    mesh_spacing: float | None = None
+    lk_levels: int = 3
+    fb_threshold: float = 1.0
+    windows: dict | None = None
+    filter: FilterOptions = field(default_factory=FilterOptions)
+    mesh: MeshOptions = field(default_factory=MeshOptions)
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Tracking result of one frame.
+
+    Attributes
+    ----------
+    landmarks : ndarray, shape (L, 2)
+    vertices : ndarray, shape (N, 2)
+        Mesh vertices; rows ``0 .. L-1`` equal ``landmarks``.
+    lost : ndarray, shape (L,) bool
+        The LK measurement was rejected; the filter carried the point.
+    """
+
+    landmarks: np.ndarray
+    vertices: np.ndarray
+    lost: np.ndarray
+
+
+class FaceTracker:
+    """Markerless face tracker (LK + CONDENSATION landmarks, harmonic + LM mesh).
+
+    Parameters
+    ----------
+    first_frame : ndarray, shape (H, W, 3) uint8 RGB or (H, W) grey
+    landmarks : ndarray, shape (L, 2)
+        Landmarks on the first frame (pixels, x right, y down), inside the frame.
+    options : TrackerOptions
+
+    Attributes
+    ----------
+    mesh : FaceMesh
+        First-frame mesh (landmarks are vertices ``0 .. L-1``).
+    first : FrameResult
+        Result for the first frame (the given landmarks and the mesh).
+    """
+
+    def __init__(self, first_frame: np.ndarray, landmarks: np.ndarray, options: TrackerOptions = TrackerOptions()):
+        self.opt = options
+        gray = to_gray(first_frame)
+        h, w = gray.shape
+        lm = validate_landmarks(landmarks, "landmarks", size=(w, h))
+        self.size = (w, h)
+        self.mesh: FaceMesh = build_face_mesh(lm, options.mesh_spacing)
+        L = len(lm)
+        self.L = L
+        self.scale = face_scale(lm)
+        self.windows = lk_windows(lm, options.windows)
+        self._maxwin = tuple(int(x) for x in self.windows.max(0))
+        self.harmonic = HarmonicDeformer(self.mesh.vertices, self.mesh.faces, np.arange(L))  # eq. 9, factored once
+        held = np.zeros(len(self.mesh.vertices), bool)
+        held[:L] = True
+        self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh)
+        self.filter = CondensationFilter(gray, lm, self.scale, options.filter) if options.use_filter else None
+        self._pyr = build_pyramid(_u8(gray), self._maxwin, options.lk_levels)
+        self._prep = prepare_image(gray, options.mesh.blur * self.scale)
+        self._lm = lm.copy()
+        self._V = self.mesh.vertices.copy()
+        self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
+        self.timings = {"landmarks": 0.0, "mesh": 0.0}
+
+    def track(self, frame: np.ndarray, detections: np.ndarray | None = None) -> FrameResult:
+        """Track the next frame.
+
+        Parameters
+        ----------
+        frame : ndarray, shape (H, W, 3) uint8 RGB or (H, W) grey
+            Same size as the first frame.
+        detections : ndarray, shape (L, 2), optional
+            Per-frame detected landmarks used as extra filter observations (rows of NaN ignored).
+
+        Returns
+        -------
+        FrameResult
+        """
+        t0 = time.perf_counter()
+        gray = to_gray(frame)
+        if (gray.shape[1], gray.shape[0]) != self.size:
+            raise InputError(f"frame: expected size {self.size[0]} x {self.size[1]}, "
+                             f"found {gray.shape[1]} x {gray.shape[0]}")
+        pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
+        lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
+                      self.opt.fb_threshold * self.scale)
+        if self.filter is not None:
+            lm, lost = self.filter.step(gray, lk.points, lk.ok, detections)
+        else:
+            lm, lost = lk.points, ~lk.ok
+        lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])
+        t1 = time.perf_counter()
+        # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
+        V_init = self._V + self.harmonic.solve(lm - self._lm)
+        V_init[: self.L] = lm
+        prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
+        V = self.refiner.refine(self._prep, prep, self._V, V_init) if self.opt.refine_mesh else V_init
+        t2 = time.perf_counter()
+        self.timings["landmarks"] += t1 - t0
+        self.timings["mesh"] += t2 - t1
+        self._pyr, self._prep, self._lm, self._V = pyr, prep, lm, V
+        return FrameResult(lm.copy(), V.copy(), np.asarray(lost, bool).copy())
+
+
+def _u8(gray: np.ndarray) -> np.ndarray:
+    return np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    """Result of :func:`capture`.
+
+    Attributes
+    ----------
+    capture : Capture
+        The tracked sequence (landmarks (T, L, 2), vertices (T, N, 2), faces, fps, size, lost).
+    out : Path or None
+        Output folder, if one was written.
+    seconds : dict
+        Wall time by stage: ``decode``, ``landmarks``, ``mesh``, ``detect``, ``output``.
+    """
+
+    capture: Capture
+    out: Path | None
+    seconds: dict
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        return self.capture.landmarks
+
+    @property
+    def vertices(self) -> np.ndarray:
+        return self.capture.vertices
+
+    @property
+    def lost(self) -> np.ndarray:
+        return self.capture.lost
+
+
+def check_capture_args(video, landmarks, detector, out, max_frames, fps):
+    """Validate the arguments of :func:`capture` before any work; returns (source, landmarks, detector)."""
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
+                                   or max_frames < 1):
+        raise InputError(f"--max-frames: expected a positive integer, found {max_frames}")
+    if (landmarks is None) == (detector is None):
+        raise InputError("landmarks: expected exactly one of --landmarks FILE or --detector NAME, found "
+                         + ("both" if landmarks is not None else "neither"))
+    if out is not None:
+        o = Path(out)
+        if o.exists() and not o.is_dir():
+            raise InputError(f"output folder {o}: expected a folder or a new path, found a file")
+    src = video if isinstance(video, FrameSource) else open_frames(video, fps)
+    det = None
+    if detector is not None:
+        if isinstance(detector, str):
+            from .detect import get_detector
+
+            det = get_detector(detector)
+        else:
+            det = detector
+        lm = None
+    elif isinstance(landmarks, (str, os.PathLike)):
+        lm = validate_landmarks(read_landmarks(landmarks), f"landmark file {landmarks}", size=src.size)
+    else:
+        lm = validate_landmarks(landmarks, "landmarks", size=src.size)
+    return src, lm, det
+
+
+def capture(video, landmarks=None, detector=None, out=None, max_frames: int | None = None,
+            overlay: bool = True, fps: float | None = None, options: TrackerOptions = TrackerOptions(),
+            detections_as_observations: bool = True,
+            progress: Callable[[int, int | None], None] | None = None) -> CaptureResult:
+    """Track a face through a video or an image folder.
+
+    Parameters
+    ----------
+    video : path-like or FrameSource
+        Video file or folder of images.
+    landmarks : path-like or ndarray (L, 2), optional
+        First-frame landmarks (``.pts`` / ``.json`` file or array). Exactly one of ``landmarks``
+        and ``detector``.
+    detector : str or detector object, optional
+        ``"dlib"``: detect the 68 landmarks on the first frame (and, with
+        ``detections_as_observations``, on every frame as extra filter observations).
+    out : path-like, optional
+        Output folder (written atomically): ``track.npz``, ``landmarks.csv``, ``overlay.mp4``.
+    max_frames : int, optional
+        Stop after this many frames (>= 1).
+    overlay : bool
+        Write ``overlay.mp4`` (only with ``out``).
+    fps : float, optional
+        Frame rate of an image folder (default 25).
+    options : TrackerOptions
+    detections_as_observations : bool
+        In detector mode, feed per-frame detections to the particle filter.
+    progress : callable, optional
+        Called as ``progress(frames_done, total_or_None)`` after every frame.
+
+    Returns
+    -------
+    CaptureResult
+
+    Raises
+    ------
+    InputError
+        Any bad input, before any work starts (and no output folder is left behind).
+    """
+    src, lm0, det = check_capture_args(video, landmarks, detector, out, max_frames, fps)
+    total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
+    secs = {"decode": 0.0, "landmarks": 0.0, "mesh": 0.0, "detect": 0.0, "output": 0.0}
+
+    def run(stage: Path | None):
+        frames = src.frames(max_frames)
+        t = time.perf_counter()
+        first = next(frames)
+        secs["decode"] += time.perf_counter() - t
+        nonlocal lm0
+        if lm0 is None:
+            t = time.perf_counter()
+            lm0 = det.detect(first)
+            secs["detect"] += time.perf_counter() - t
+            if lm0 is None:
+                raise InputError(f"--detector {getattr(det, 'name', det)}: expected a face on the first frame of "
+                                 f"{src.path}, found none")
+        tracker = FaceTracker(first, lm0, options)
+        writer = None
+        if stage is not None and overlay:
+            from .overlay import OverlayWriter, draw_overlay
+
+            writer = OverlayWriter(stage / OVERLAY_FILE, src.fps, src.size)
+        lms, Vs, losts = [tracker.first.landmarks], [tracker.first.vertices], [tracker.first.lost]
+        try:
+            if writer is not None:
+                t = time.perf_counter()
+                writer.write(draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, lm0))
+                secs["output"] += time.perf_counter() - t
+            if progress:
+                progress(1, total)
+            while True:
+                t = time.perf_counter()
+                frame = next(frames, None)
+                secs["decode"] += time.perf_counter() - t
+                if frame is None:
+                    break
+                dets = None
+                if det is not None and detections_as_observations:
+                    t = time.perf_counter()
+                    d = det.detect(frame, near=lms[-1])
+                    secs["detect"] += time.perf_counter() - t
+                    dets = d if d is not None and len(d) == tracker.L else None
+                res = tracker.track(frame, dets)
+                lms.append(res.landmarks)
+                Vs.append(res.vertices)
+                losts.append(res.lost)
+                if writer is not None:
+                    t = time.perf_counter()
+                    writer.write(draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost))
+                    secs["output"] += time.perf_counter() - t
+                if progress:
+                    progress(len(lms), total)
+        finally:
+            if writer is not None:
+                writer.close()
+        secs["landmarks"] = tracker.timings["landmarks"]
+        secs["mesh"] = tracker.timings["mesh"]
+        cap = Capture(np.stack(lms), np.stack(Vs), tracker.mesh.faces.copy(), float(src.fps), src.size,
+                      np.stack(losts), None, Path(src.path) if src.kind == "video" else None)
+        if stage is not None:
+            t = time.perf_counter()
+            write_capture(stage, cap)
+            secs["output"] += time.perf_counter() - t
+        return cap
+
+    if out is None:
+        cap = run(None)
+        return CaptureResult(cap, None, secs)
+    from facebasis.atomic import atomic_directory
+
+    out = Path(out)
+    with atomic_directory(out) as stage:
+        cap = run(stage)
+    cap = replace(cap, folder=out)
+    return CaptureResult(cap, out, secs)

@@ -89,3 +89,13 @@ def test_demo_quick(tmp_path):
     assert main(["verify", str(out / "rig")]) == 0
     assert main(["report", str(out / "rig"), "--formats", "png"]) == 0
     assert (out / "rig" / "report" / "convergence.png").is_file() and (out / "rig" / "rig.glb").is_file()
+    # and it captures its generated sequence and reproduces it on the built-in cartoon and rig
+    from facebasis.capture.trackfile import read_capture
+
+    cap = read_capture(out / "capture")
+    assert cap.landmarks.shape == (summary["video"]["frames"], 68, 2)
+    assert summary["video"]["landmark_error_px_mean"] < 2.0  # against the generated sequence's known motion
+    assert (out / "capture" / "overlay.mp4").stat().st_size > 0 and (out / "cartoon" / "cartoon.mp4").is_file()
+    weights = (out / "retarget" / "weights.csv").read_text().splitlines()
+    assert len(weights) == 1 + summary["video"]["frames"] and weights[0].startswith("frame,jawOpen")
+    assert (out / "retarget" / "animation.glb").is_file()

@@ -90,6 +90,14 @@ def test_gltf_validator_reports_no_errors(glb):
     assert issues["numErrors"] == 0, issues["messages"][:5]
 
 
+def test_rig_export_glb_passes_the_validator(tmp_path):
+    from facebasis.geometry.gltf import write_glb
+
+    path = write_glb(default_template(), tmp_path / "rig.glb")
+    issues = _validate(path)
+    assert issues["numErrors"] == 0, issues["messages"][:5]
+
+
 def test_mesh_animation_glb_is_valid_and_exact(tmp_path):
     from facebasis.defaults.face_landmarks import face_landmarks
     from facebasis.retarget.drive3d import MeshDriver

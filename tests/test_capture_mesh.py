@@ -9,7 +9,8 @@ from facebasis.capture.facemesh import (
     points_in_polygon,
     signed_areas,
 )
-from facebasis.capture.harmonic import HarmonicDeformer, cotangent_laplacian
+from facebasis.capture.harmonic import HarmonicDeformer
+from facebasis.geometry.laplacian import cotangent_laplacian
 from facebasis.capture.synthetic import ASTRONAUT_LANDMARKS, cartoon_landmarks
 from facebasis.errors import MeshError
 

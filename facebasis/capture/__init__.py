@@ -14,8 +14,9 @@ Modules: ``video`` (frame sources), ``landmarks`` (files, iBUG-68 regions, LK wi
 ``overlay`` (overlay video), ``synthetic`` (generated sequences with ground truth).
 """
 
+from ..geometry.laplacian import cotangent_laplacian
 from .facemesh import FaceMesh, build_face_mesh
-from .harmonic import HarmonicDeformer, cotangent_laplacian
+from .harmonic import HarmonicDeformer
 from .landmarks import IBUG68_REGIONS, read_landmarks
 from .meshtrack import MeshOptions
 from .particle import FilterOptions

@@ -122,7 +122,7 @@ class MeshRefiner:
     """
 
     def __init__(self, V0, F, held, spacing, options: MeshOptions = MeshOptions()):
-        from .harmonic import cotangent_laplacian
+        from facebasis.geometry.laplacian import cotangent_laplacian
 
         self.opt = options
         self.F = np.asarray(F, int)

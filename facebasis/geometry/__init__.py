@@ -9,6 +9,8 @@ Modules
 mesh        validation of vertex and face arrays, median edge length
 meshio      OBJ/PLY reading and writing (atomic), "read a mesh in a reference's topology"
 gradients   triangle frames and deformation gradients, the frame-to-edge operator
+laplacian   the cotangent Laplace-Beltrami operator and lumped mass (planar or spatial meshes)
+obj         the vectorised OBJ reader and writer
 poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders

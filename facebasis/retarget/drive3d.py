@@ -28,37 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, MeshError
+from ..geometry.laplacian import cotangent_laplacian, lumped_mass
 from .rbf import edge_length_ratio, fit_rbf
-
-
-def cotangent_laplacian(V, F):
-    """Cotangent Laplacian L (n, n) (positive semidefinite, ``L = sum_e w_e (e_i - e_j)(e_i - e_j)^T``)
-    and lumped mass M (n,) (a third of the incident triangle areas). Degenerate triangles add nothing."""
-    import scipy.sparse as sp
-
-    V = np.asarray(V, np.float64)
-    F = np.asarray(F, np.int64)
-    n = len(V)
-    P = V[F]                                               # (m, 3, 3)
-    cross = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
-    tiny = 1e-12 * max(1.0, float(np.abs(V).max())) ** 2
-    ok = area2 > tiny
-    I, J, Wt = [], [], []
-    for i in range(3):                                     # the corner opposite each edge
-        a, b, c = P[:, i], P[:, (i + 1) % 3], P[:, (i + 2) % 3]
-        cot = np.einsum("ij,ij->i", b - a, c - a) / np.where(ok, area2, 1.0)
-        cot = np.where(ok, cot, 0.0) * 0.5
-        I.append(F[:, (i + 1) % 3])
-        J.append(F[:, (i + 2) % 3])
-        Wt.append(cot)
-    I, J, Wt = np.concatenate(I), np.concatenate(J), np.concatenate(Wt)
-    Wm = sp.coo_matrix((Wt, (I, J)), shape=(n, n)).tocsr()
-    Wm = Wm + Wm.T
-    L = sp.diags(np.asarray(Wm.sum(axis=1)).ravel()) - Wm
-    mass = np.zeros(n)
-    np.add.at(mass, F.ravel(), np.repeat(np.where(ok, area2 / 6.0, 0.0), 3))
-    return L.tocsc(), mass
 
 
 def biharmonic_basis(V, F, handles, eps: float = 1e-9) -> np.ndarray:
@@ -73,7 +44,7 @@ def biharmonic_basis(V, F, handles, eps: float = 1e-9) -> np.ndarray:
     V = np.asarray(V, np.float64)
     n = len(V)
     h = np.asarray(handles, np.int64)
-    L, mass = cotangent_laplacian(V, F)
+    L, mass = cotangent_laplacian(V, F).tocsc(), lumped_mass(V, F)
     m = np.where(mass > 0, mass, max(float(mass[mass > 0].mean()) if (mass > 0).any() else 1.0, 1e-12))
     A = (L.T @ sp.diags(1.0 / m) @ L).tocsc()
     # eps relative to the operator's scale: parts with no handle (e.g. separate components) stay put
@@ -219,4 +190,4 @@ def drive_mesh(vertices, faces, indices, landmarks, capture_vertices=None, captu
     return MeshDriver(vertices, faces, indices, lm[0], cv, capture_faces).run(lm, fps)
 
 
-__all__ = ["MeshDriver", "MeshAnimation", "drive_mesh", "biharmonic_basis", "cotangent_laplacian"]
+__all__ = ["MeshDriver", "MeshAnimation", "drive_mesh", "biharmonic_basis"]

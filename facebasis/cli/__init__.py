@@ -28,10 +28,18 @@ DESCRIPTION = ("facebasis: personalised facial blendshape rigs (deformation tran
                "Errors exit with status 2.")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``error: facebasis rig: argument --iterations: ...``."""
+
+    def error(self, message):
+        print(f"error: {self.prog}: {message} (see '{self.prog} --help')", file=sys.stderr)
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
-    parser = argparse.ArgumentParser(prog="facebasis", description=DESCRIPTION)
+    parser = _Parser(prog="facebasis", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"facebasis {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in GROUPS:

@@ -29,7 +29,12 @@ def cmd_sweep(args) -> int:
     from ..report.studies import STUDIES, run_tasks, study_tasks, write_table
 
     studies = STUDIES if args.study == "all" else tuple(args.study.split(","))
-    seeds = tuple(int(s) for s in args.seeds.split(","))
+    try:
+        seeds = tuple(int(s) for s in args.seeds.split(","))
+    except ValueError:
+        from ..errors import InputError
+
+        raise InputError(f"--seeds: expected whole numbers separated by commas, found {args.seeds!r}") from None
     tasks = [t for st in studies for t in study_tasks(st, args.problem, seeds)]
     where = args.scheduler or f"a local Dask cluster of {args.workers or 'all'} worker processes"
     print(f"{len(tasks)} tasks ({', '.join(studies)}) on problem {args.problem}, seeds {list(seeds)}, on {where}")

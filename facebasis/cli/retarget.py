@@ -26,7 +26,13 @@ def cmd_animate3d(args) -> int:
 
 
 def cmd_retarget(args) -> int:
+    import math
+
+    from ..errors import InputError
     from ..retarget.pipeline import run_retarget
+
+    if args.smooth is not None and not (math.isfinite(args.smooth) and args.smooth >= 0):
+        raise InputError(f"--smooth: expected a finite number >= 0, found {args.smooth}")
 
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      neutral=args.neutral, first_frame_neutral=args.first_frame_neutral, log=print)

@@ -77,6 +77,7 @@ CASES = [
     ("retarget {d}/capture --exclusive jawOpen:smileBig --out {o}", "smileBig"),
     ("retarget {d}/capture --rig {d}/template --landmarks {d}/far_idx.json --out {o}", "far_idx.json"),
     ("retarget {d}/capture --smooth -1 --out {o}", "--smooth"),
+    ("retarget {d}/capture --ridge nan --out {o}", "--ridge: expected a finite number >= 0, found nan"),
     ("retarget {d}/nope --out {o}", "nope"),
 ]
 

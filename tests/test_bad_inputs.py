@@ -79,6 +79,14 @@ CASES = [
     ("retarget {d}/capture --smooth -1 --out {o}", "--smooth"),
     ("retarget {d}/capture --ridge nan --out {o}", "--ridge: expected a finite number >= 0, found nan"),
     ("retarget {d}/nope --out {o}", "nope"),
+    # registration
+    ("register {d}/nope.obj --template {d}/target.obj --out {o}", "nope.obj"),
+    ("register {d}/target.obj --template {d}/nope.obj --out {o}", "nope.obj"),
+    ("register {d}/points.obj --template {d}/target.obj --out {o}", "points.obj"),
+    ("register {d}/target.obj --template {d}/target.obj --landmarks {d}/lm3.json {d}/lm4.json --out {o}", "lm"),
+    ("register {d}/target.obj --template {d}/target.obj --landmarks {d}/lm3.json {d}/far3.json --out {o}", "far3.json"),
+    ("register {d}/huge.obj --template {d}/target.obj --out {o}", "scale"),
+    ("register {d}/target.obj --template {d}/target.obj --out {d}/afile", "afile"),
 ]
 
 
@@ -108,6 +116,11 @@ def inputs(tmp_path_factory):
     (d / "notjson.json").write_text("{not json")
     (d / "list.json").write_text("[1, 2]")
     (d / "empty.csv").write_text("")
+    (d / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    write_mesh(d / "huge.obj", person.neutral * 1000.0, person.faces)
+    (d / "lm3.json").write_text(json.dumps([0, 100, 200]))
+    (d / "lm4.json").write_text(json.dumps([0, 100, 200, 300]))
+    (d / "far3.json").write_text(json.dumps([0, 100, 10 ** 7]))
     seq = synthetic_sequence(3, size=(96, 96))
     (d / "frames").mkdir()
     for i, f in enumerate(seq.frames):

@@ -16,10 +16,10 @@ import argparse
 import sys
 
 from ..errors import FacebasisError
-from . import capture, contact, demo, report, retarget, rigging
+from . import capture, contact, demo, registration, report, retarget, rigging
 
 #: command groups, in the order their commands are listed by ``facebasis --help``
-GROUPS = (demo, rigging, contact, capture, retarget, report)
+GROUPS = (demo, rigging, contact, capture, retarget, report, registration)
 
 
 DESCRIPTION = ("facebasis: personalised facial blendshape rigs (deformation transfer, example-based "

@@ -15,6 +15,9 @@ poisson     factor-once reconstruction of vertices from triangle edges (Cholesky
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders
 gltf        a rig as glTF 2.0 binary with one morph target per shape
+rigid       similarity alignment of a template to a scan (landmarks, or orientation search + trimmed ICP)
+nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closest points on a scan
+registration  scans of any topology to meshes in the template's topology (rigid + non-rigid ICP)
 
 References
 ----------

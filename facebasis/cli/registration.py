@@ -1,0 +1,35 @@
+"""Command-line command of scan registration: register.
+
+``register(subparsers)`` adds it to the ``facebasis`` command; the handler only parses, calls
+:func:`facebasis.geometry.registration.register_files` and prints.
+"""
+
+from __future__ import annotations
+
+
+def cmd_register(args) -> int:
+    from ..geometry.registration import register_files
+
+    s = register_files(args.scans, args.template, args.out, args.landmarks, args.neutral, log=print)
+    print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``register`` to an argparse sub-parser collection."""
+    p = subparsers.add_parser(
+        "register", help="lay the template's topology onto 3D face scans (non-rigid ICP)",
+        description="Align the template neutral to each scan (similarity from landmarks, else a search over "
+                    "orientations and trimmed ICP with scale), then deform it onto the scan with non-rigid ICP and "
+                    "a stiffness schedule. Writes OUT/<scan>.obj in the template's topology and OUT/<scan>.json "
+                    "(residual distance to the scan, iterations, landmark error, vertices without scan surface). "
+                    "With a folder, the neutral scan is registered first and the other scans start from it.")
+    p.add_argument("scans", metavar="SCAN_OR_DIR", help="scan (.obj/.ply, any topology) or folder of one person's scans")
+    p.add_argument("--template", required=True, metavar="TEMPLATE_NEUTRAL.obj", help="template neutral mesh")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--landmarks", nargs=2, default=None, metavar=("SCAN_LM.json", "TEMPLATE_LM.json"),
+                   help="scan landmarks (vertex indices or [x, y, z] points; for a folder an object mapping scan "
+                        "names to such lists) and the template's landmark vertex indices, in the same order")
+    p.add_argument("--neutral", default=None, metavar="NAME",
+                   help="the neutral scan's file name or stem inside the folder (default: neutral)")
+    p.set_defaults(func=cmd_register)

@@ -1,0 +1,373 @@
+"""Registration of 3D face scans (any topology) to a template: meshes in the template's topology.
+
+Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else a search over
+candidate orientations plus trimmed ICP with scale), then non-rigid ICP with a stiffness schedule
+(:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term). The
+work happens in the template's frame and units; the result is mapped back onto the scan.
+
+:class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
+landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
+person's expressions, register the neutral scan first, then each expression with
+``start=<registered neutral>``: every expression then starts from the person's own neutral, so a
+vertex index means the same point of the face across the set. :func:`register_files` does this
+for files and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per scan, atomically.
+
+References
+----------
+Amberg B., Romdhani S., Vetter T. Optimal step nonrigid ICP algorithms for surface registration.
+CVPR 2007.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, MeshError
+from .mesh import median_edge_length, validate_mesh
+from .nricp import NonRigidICP, NricpOptions, ScanSurface
+from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
+
+#: A scan whose size (bounding-box diagonal) differs from the template's by more than this factor
+#: (either way) is refused as being in other units.
+UNIT_RATIO = 4.0
+
+
+@dataclass(frozen=True)
+class RegistrationOptions:
+    """Options of :class:`Registration`.
+
+    Attributes
+    ----------
+    rigid : the similarity alignment's options
+    nricp : the non-rigid ICP's stiffness schedule and correspondence rules
+    unit_ratio : refuse scans whose size differs from the template's by more than this factor
+    """
+
+    rigid: RigidOptions = field(default_factory=RigidOptions)
+    nricp: NricpOptions = field(default_factory=NricpOptions)
+    unit_ratio: float = UNIT_RATIO
+
+
+@dataclass(frozen=True)
+class RegistrationResult:
+    """One registered scan.
+
+    Attributes
+    ----------
+    vertices : (n, 3) the template's topology laid on the scan, in the scan's frame and units
+    similarity : template -> scan similarity found by the rigid stage
+    distance : (n,) distance of each vertex to the scan surface (scan units)
+    no_surface : (n,) bool, vertices that found no usable scan surface (followed the stiffness term)
+    iterations : non-rigid ICP iterations over all stiffness levels
+    rigid_score : trimmed symmetric RMS of the rigid stage (template units)
+    landmark_error : (k,) distance of each registered landmark vertex to its scan landmark, or None
+    seconds : wall time
+    """
+
+    vertices: np.ndarray
+    similarity: Similarity
+    distance: np.ndarray
+    no_surface: np.ndarray
+    iterations: int
+    rigid_score: float
+    landmark_error: np.ndarray | None
+    seconds: float
+
+    def report(self) -> dict:
+        """Summary as plain JSON types (distances in scan units)."""
+        d = self.distance[~self.no_surface]
+        stats = (lambda a: {"median": float(np.median(a)), "p95": float(np.percentile(a, 95)),
+                            "max": float(a.max())}) if len(d) else (lambda a: None)
+        lm = self.landmark_error
+        return {
+            "vertices": int(len(self.vertices)),
+            "residual": stats(d),
+            "residual_note": "distance of the vertices that found scan surface to the scan, scan units",
+            "iterations": int(self.iterations),
+            "landmark_error": None if lm is None else {"mean": float(lm.mean()), "max": float(lm.max())},
+            "no_surface_vertices": int(self.no_surface.sum()),
+            "no_surface_fraction": float(self.no_surface.mean()),
+            "rigid": {**self.similarity.as_dict(), "trimmed_rms_template_units": float(self.rigid_score)},
+            "seconds": float(self.seconds),
+        }
+
+
+def _bbox_diagonal(V: np.ndarray) -> float:
+    return float(np.linalg.norm(V.max(0) - V.min(0)))
+
+
+def check_landmarks(template_landmarks, scan_landmarks, n_template: int, n_scan: int | None,
+                    template_name: str = "template landmarks", scan_name: str = "scan landmarks"
+                    ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Validate a landmark pair; returns template indices (k,) and scan landmarks (k,) or (k, 3).
+
+    Raises
+    ------
+    InputError
+        Non-integer or out-of-range template indices, different lengths, fewer than 3 landmarks,
+        scan landmarks that are neither indices (checked against ``n_scan``) nor 3D points.
+    """
+    t = np.asarray(template_landmarks)
+    if t.ndim != 1 or not (np.issubdtype(t.dtype, np.integer) or (t.size and np.all(np.mod(t, 1) == 0))):
+        raise InputError(f"{template_name}: expected a list of template vertex indices, found shape "
+                         f"{t.shape} of {t.dtype}")
+    t = t.astype(np.int64)
+    s = np.asarray(scan_landmarks, dtype=np.float64) if scan_landmarks is not None else None
+    if s is not None and len(s) != len(t):
+        raise InputError(f"{scan_name} and {template_name}: expected the same number of landmarks, found "
+                         f"{len(s)} and {len(t)}")
+    if len(t) < 3:
+        raise InputError(f"{template_name}: expected at least 3 landmarks, found {len(t)}")
+    bad = np.flatnonzero((t < 0) | (t >= n_template))
+    if len(bad):
+        raise InputError(f"{template_name}: expected vertex indices in [0, {n_template}), found "
+                         f"{int(t[bad[0]])} at position {int(bad[0])} ({len(bad)} out of range)")
+    if s is not None:
+        if s.ndim == 1:
+            if not np.all(np.mod(s, 1) == 0):
+                raise InputError(f"{scan_name}: expected scan vertex indices or [x, y, z] points, found non-integers")
+            if n_scan is not None:
+                bad = np.flatnonzero((s < 0) | (s >= n_scan))
+                if len(bad):
+                    raise InputError(f"{scan_name}: expected vertex indices in [0, {n_scan}), found "
+                                     f"{int(s[bad[0]])} at position {int(bad[0])} ({len(bad)} out of range)")
+            s = s.astype(np.int64)
+        elif s.ndim != 2 or s.shape[1] != 3 or not np.all(np.isfinite(s)):
+            raise InputError(f"{scan_name}: expected k vertex indices or k finite [x, y, z] points, found shape {s.shape}")
+    return t, s
+
+
+def read_landmarks(path: str | os.PathLike):
+    """Read a landmark JSON file: a list of vertex indices or of [x, y, z] points, or an object
+    ``{"landmarks": [...]}``, or (scan landmarks of a folder) an object mapping scan stems to lists."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"landmarks {path}: expected a JSON file, found no such file")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"landmarks {path}: expected JSON, found unreadable text ({exc})") from exc
+    if isinstance(data, dict) and "landmarks" in data:
+        data = data["landmarks"]
+    if isinstance(data, dict):
+        return {str(k): v for k, v in data.items()}
+    if not isinstance(data, list):
+        raise InputError(f"landmarks {path}: expected a list of indices or points, found {type(data).__name__}")
+    try:
+        return np.asarray(data, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"landmarks {path}: expected a list of indices or [x, y, z] points, found ragged or "
+                         f"non-numeric entries") from exc
+
+
+class Registration:
+    """A template prepared for registering many scans.
+
+    Parameters
+    ----------
+    V : (n, 3) template neutral, F : (m, 3) its triangles
+    options : :class:`RegistrationOptions`
+    landmarks : (k,) template vertex indices used when scan landmarks are given
+    name : the template's name in messages
+    """
+
+    def __init__(self, V, F, options: RegistrationOptions | None = None, landmarks=None, name: str = "template"):
+        self.V, self.F = validate_mesh(V, F, name, check_degenerate=False)
+        self.name = name
+        self.options = options or RegistrationOptions()
+        self.landmarks = None
+        if landmarks is not None:
+            self.landmarks, _ = check_landmarks(landmarks, None, len(self.V), None)
+        self.h = median_edge_length(self.V, self.F)
+        self.diagonal = _bbox_diagonal(self.V)
+        self.nricp = NonRigidICP(self.F, len(self.V))
+
+    def check_scan(self, V, F, name: str = "scan", scan_landmarks=None):
+        """Validate a scan (and its landmarks) before any work; returns ``(V, F, scan landmarks)``."""
+        V = np.asarray(V, dtype=np.float64) if V is not None else V
+        F = np.asarray(F) if F is not None else np.zeros((0, 3), np.int64)
+        if F.size == 0:
+            raise MeshError(f"{name}: expected a triangle mesh, found no faces (a point cloud cannot be registered)")
+        V, F = validate_mesh(V, F, name, check_degenerate=False)
+        ratio = _bbox_diagonal(V) / self.diagonal
+        r = self.options.unit_ratio
+        if not 1.0 / r <= ratio <= r:
+            raise InputError(
+                f"{name}: expected a size like the template's (bounding-box diagonal {self.diagonal:.4g}), found "
+                f"{_bbox_diagonal(V):.4g}, {ratio:.3g} times as large; the units differ: scale the scan by about "
+                f"{_nice_scale(1.0 / ratio):g}")
+        lm = None
+        if scan_landmarks is not None:
+            if self.landmarks is None:
+                raise InputError(f"{name}: scan landmarks given but the template has no landmarks")
+            _, lm = check_landmarks(self.landmarks, scan_landmarks, len(self.V), len(V))
+            if lm.ndim == 1:
+                lm = V[lm]
+        return V, F, lm
+
+    def register(self, V, F, scan_landmarks=None, start: np.ndarray | None = None,
+                 name: str = "scan") -> RegistrationResult:
+        """Register one scan.
+
+        Parameters
+        ----------
+        V : (N, 3) scan vertices, F : (M, 3) scan triangles (any topology, holes allowed)
+        scan_landmarks : (k,) scan vertex indices or (k, 3) points, matching the template landmarks
+        start : (n, 3) start mesh in the template's topology (e.g. the person's registered neutral,
+            in any frame); default the template neutral
+        name : the scan's name in messages
+
+        Returns
+        -------
+        RegistrationResult
+        """
+        V, F, lm_pts = self.check_scan(V, F, name, scan_landmarks)
+        P = self.V
+        if start is not None:
+            P = validate_mesh(start, self.F, f"{name}: start mesh", check_degenerate=False)[0]
+            if len(P) != len(self.V):
+                raise InputError(f"{name}: start mesh: expected {len(self.V)} vertices, found {len(P)}")
+        t0 = time.perf_counter()
+        # rigid stage: in the scan's frame
+        guess = umeyama(P[self.landmarks], lm_pts) if lm_pts is not None else None
+        sim, score = align_similarity(P, self.F, V, F, self.options.rigid, start=guess)
+        surface = ScanSurface(V, F)
+        rng = np.random.default_rng(self.options.rigid.seed)
+        sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
+        sim, score = refine_point_to_plane(sub, surface.closest, sim, keep=self.options.rigid.keep_template)
+        # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
+        inv = sim.inverse()
+        surface_t = ScanSurface(inv.apply(V), F)
+        lm_t = inv.apply(lm_pts) if lm_pts is not None else None
+        res = self.nricp.fit(P, surface_t, self.options.nricp, self.landmarks if lm_pts is not None else None,
+                             lm_t, h=median_edge_length(P, self.F))
+        X = sim.apply(res.vertices)
+        lm_err = np.linalg.norm(X[self.landmarks] - lm_pts, axis=1) if lm_pts is not None else None
+        return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
+                                  lm_err, time.perf_counter() - t0)
+
+
+def _nice_scale(x: float) -> float:
+    """``x`` rounded to a power of ten when close to one (units), else to 3 significant digits."""
+    p = 10.0 ** np.round(np.log10(x))
+    return float(p) if abs(np.log10(x / p)) < 0.15 else float(f"{x:.3g}")
+
+
+def register_scan(template_V, template_F, scan_V, scan_F, options: RegistrationOptions | None = None,
+                  template_landmarks=None, scan_landmarks=None, start=None) -> RegistrationResult:
+    """Register one scan onto a template (the one-off form of :class:`Registration`)."""
+    return Registration(template_V, template_F, options, template_landmarks).register(
+        scan_V, scan_F, scan_landmarks, start)
+
+
+def _scan_files(scan_or_dir: Path) -> list[Path]:
+    from .meshio import MESH_SUFFIXES
+
+    if scan_or_dir.is_dir():
+        files = sorted(p for p in scan_or_dir.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+        if not files:
+            raise InputError(f"scans {scan_or_dir}: expected .obj or .ply files in the folder, found none")
+        stems = [p.stem for p in files]
+        dup = sorted({s for s in stems if stems.count(s) > 1})
+        if dup:
+            raise InputError(f"scans {scan_or_dir}: expected one file per name, found {dup[0]} twice (.obj and .ply)")
+        return files
+    if not scan_or_dir.exists():
+        raise InputError(f"scans {scan_or_dir}: expected a scan file or a folder of scans, found no such path")
+    return [scan_or_dir]
+
+
+def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
+                   options: RegistrationOptions | None = None, log=None) -> dict:
+    """Register a scan, or a folder of one person's scans, and write the results to ``out``.
+
+    Parameters
+    ----------
+    scan_or_dir : an OBJ/PLY scan, or a folder of them; in a folder the scan named ``neutral``
+        (``neutral.obj``/``.ply``, or ``neutral``'s stem) is registered first from the template and
+        the others from the registered neutral
+    template : the template neutral (OBJ/PLY)
+    out : output folder: ``<stem>.obj`` (template topology) and ``<stem>.json`` (report) per scan,
+        and ``summary.json``; written atomically (all or nothing)
+    landmarks : ``(SCAN_LM.json, TEMPLATE_LM.json)`` or None; for a folder, SCAN_LM.json maps scan
+        stems to landmark lists (scans it does not name get none)
+    neutral : the neutral scan's file name or stem in a folder (default ``neutral``)
+
+    Every input is read and checked before any registration starts.
+
+    Returns
+    -------
+    summary : dict with one report per scan, in registration order
+    """
+    from ..atomic import atomic_directory, atomic_write_json
+    from .meshio import read_mesh, write_mesh
+
+    log = log or (lambda *a: None)
+    src = Path(scan_or_dir)
+    files = _scan_files(src)
+    T_V, T_F = read_mesh(template)
+    t_lm = s_lm = None
+    if landmarks is not None:
+        s_path, t_path = landmarks
+        t_lm = read_landmarks(t_path)
+        if isinstance(t_lm, dict):
+            raise InputError(f"template landmarks {t_path}: expected a list of template vertex indices, found an object")
+        s_lm = read_landmarks(s_path)
+        if src.is_dir() and not isinstance(s_lm, dict):
+            raise InputError(f"scan landmarks {s_path}: expected an object mapping scan names to landmark lists "
+                             f"when registering a folder, found a list")
+        if not src.is_dir() and isinstance(s_lm, dict):
+            s_lm = s_lm.get(files[0].stem, s_lm.get(files[0].name))
+            if s_lm is None:
+                raise InputError(f"scan landmarks {s_path}: expected an entry for {files[0].stem}, found none")
+        if len(t_lm) != (len(s_lm) if not isinstance(s_lm, dict) else len(t_lm)):
+            raise InputError(f"scan landmarks {s_path} and template landmarks {t_path}: expected the same number "
+                             f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
+        check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
+    reg = Registration(T_V, T_F, options, t_lm, name=str(template))
+    order = files
+    if src.is_dir() and len(files) > 1:
+        want = neutral or "neutral"
+        hit = [p for p in files if p.name == want or p.stem == want]
+        if not hit:
+            raise InputError(f"scans {src}: expected a neutral scan named '{want}' (.obj/.ply) to register first, "
+                             f"found {', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}; "
+                             "name it with --neutral")
+        order = hit + [p for p in files if p is not hit[0]]
+    elif neutral is not None and not src.is_dir():
+        raise InputError(f"--neutral {neutral}: expected a folder of scans, found the single file {src}")
+    scans = []
+    for p in order:  # read and check every scan before any work
+        V, F = read_mesh(p)
+        lm = s_lm.get(p.stem, s_lm.get(p.name)) if isinstance(s_lm, dict) else s_lm
+        if lm is not None:
+            if len(lm) != len(t_lm):
+                raise InputError(f"scan landmarks for {p.name} and template landmarks: expected the same number of "
+                                 f"landmarks, found {len(lm)} and {len(t_lm)}")
+        V, F, _ = reg.check_scan(V, F, str(p), lm)
+        scans.append((p, V, F, lm))
+    summary = {"template": str(template), "scans": []}
+    with atomic_directory(out) as stage:
+        start = None
+        for k, (p, V, F, lm) in enumerate(scans):
+            res = reg.register(V, F, lm, start=start, name=str(p))
+            if k == 0 and len(scans) > 1:
+                start = res.vertices
+            write_mesh(stage / f"{p.stem}.obj", res.vertices, reg.F)
+            rep = {"scan": str(p), "scan_vertices": int(len(V)), "template": str(template),
+                   "started_from": "template" if (k == 0 or len(scans) == 1) else f"{scans[0][0].stem}.obj",
+                   **res.report()}
+            atomic_write_json(stage / f"{p.stem}.json", rep)
+            summary["scans"].append(rep)
+            r = rep["residual"] or {}
+            log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
+                f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
+                f"{rep['iterations']} iterations, {rep['seconds']:.1f} s")
+        atomic_write_json(stage / "summary.json", summary)
+    return summary

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,weights,virtual,cli,all} [--repeat N]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,rig-scale,weights,virtual,cli,all} [--repeat N]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -242,13 +242,49 @@ def bench_virtual(repeat: int) -> dict:
     return results
 
 
+def bench_rig_scale(repeat: int) -> dict:
+    """Seconds of a full generation (precompute + 10 alternations) against the number of training
+    expressions, wall and CPU, with the machine's load (other processes share the cores)."""
+    import numpy as np
+
+    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions, use_direct
+    from problems.generation import ict_person_problem
+
+    targets = {80: 6.0, 160: 12.0}
+    print("rig-scale: ICT person problem seed 0, default options (ipopt at the final alternation), "
+          f"{os.cpu_count()} cores; load average before each run in brackets")
+    print(f"  {'m':>4s} {'wall s':>7s} {'CPU s':>7s} {'target':>7s} {'precompute':>10s} {'basis+rec':>9s} "
+          f"{'weights':>8s} {'form':>9s}  load")
+    out = {}
+    for m in (20, 40, 80, 160):
+        pp = ict_person_problem(seed=0, n_train=m)
+        walls, cpus = [], []
+        for _ in range(max(1, repeat)):
+            load = os.getloadavg()[0]
+            t0, c0 = time.perf_counter(), time.process_time()
+            gen = BlendshapeGenerator(pp.problem, GenerationOptions())
+            res = gen.run()
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+        k = pp.problem.template.n_shapes
+        tgt = targets.get(m)
+        flag = "" if tgt is None else ("  ok" if min(walls) <= tgt else "  MISSED")
+        print(f"  {m:4d} {min(walls):7.2f} {cpus[int(np.argmin(walls))]:7.2f} {('<= %g' % tgt) if tgt else '':>7s} "
+              f"{res.precompute_seconds:10.2f} {sum(h.basis_seconds for h in res.history):9.2f} "
+              f"{sum(h.weight_seconds for h in res.history):8.2f} {'direct' if use_direct(k, m) else 'Woodbury':>9s}"
+              f"  [{load:.1f}]{flag}", flush=True)
+        out[m] = {"wall_s": min(walls), "cpu_s": cpus[int(np.argmin(walls))]}
+    return out
+
+
 def bench_cli(repeat: int, facex: str | None = None) -> dict:
     from problems.bench_cli import bench_cli as run
 
     return run(repeat, facex)
 
 
-BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "weights": bench_weights, "virtual": bench_virtual,
+BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "rig-scale": bench_rig_scale, "weights": bench_weights,
+           "virtual": bench_virtual,
            "cli": bench_cli}
 
 

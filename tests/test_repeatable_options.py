@@ -20,6 +20,8 @@ from facebasis.rigging.synthetic import default_face_problem
 
 from conftest import write_rig_inputs
 
+from facebasis.cli.common import Once
+
 REPEATABLE = (argparse._AppendAction, argparse._ExtendAction)
 
 
@@ -40,9 +42,22 @@ def test_no_option_takes_several_values_and_keeps_only_the_last():
     for name, sub in _subparsers(build_parser()):
         for a in _options(sub):
             takes_list = a.nargs in ("*", "+") or isinstance(a.nargs, int) and a.nargs > 1
-            if takes_list and not isinstance(a, REPEATABLE):
+            if takes_list and not isinstance(a, REPEATABLE + (Once,)):
                 offenders.append(f"{name} {a.option_strings[0]}")
     assert offenders == []
+
+
+def test_an_option_taken_once_refuses_a_second_time(capsys):
+    """``register --landmarks SCAN TEMPLATE`` is a pair: a second pair is an error, not an overwrite."""
+    from facebasis.cli import main
+
+    line = ["register", "s.obj", "--template", "t.obj", "--out", "o", "--landmarks", "a.json", "b.json",
+            "--landmarks", "c.json", "d.json"]
+    with pytest.raises(SystemExit) as exc:
+        main(line)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "argument --landmarks: expected once, found it given twice" in err
 
 
 # minimal valid command lines, to which a repeatable option is added twice

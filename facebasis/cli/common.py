@@ -61,3 +61,14 @@ def describe_pairs(pairs, given: int) -> str:
     if given > len(pairs):
         text += f" ({given - len(pairs)} repeated pair(s) merged)"
     return text
+
+
+class Once(argparse.Action):
+    """An option that takes several values once (e.g. a pair of files); given twice it is an error,
+    never a silent overwrite of the first."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, self.dest, None) is not None:
+            parser.error(f"argument {option_string}: expected once, found it given twice "
+                         f"(keeping only the last would drop {getattr(namespace, self.dest)})")
+        setattr(namespace, self.dest, values)

@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+from .common import Once
+
 
 def cmd_register(args) -> int:
     from ..geometry.registration import register_files
@@ -27,7 +29,7 @@ def register(subparsers) -> None:
     p.add_argument("scans", metavar="SCAN_OR_DIR", help="scan (.obj/.ply, any topology) or folder of one person's scans")
     p.add_argument("--template", required=True, metavar="TEMPLATE_NEUTRAL.obj", help="template neutral mesh")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--landmarks", nargs=2, default=None, metavar=("SCAN_LM.json", "TEMPLATE_LM.json"),
+    p.add_argument("--landmarks", nargs=2, default=None, action=Once, metavar=("SCAN_LM.json", "TEMPLATE_LM.json"),
                    help="scan landmarks (vertex indices or [x, y, z] points; for a folder an object mapping scan "
                         "names to such lists) and the template's landmark vertex indices, in the same order")
     p.add_argument("--neutral", default=None, metavar="NAME",

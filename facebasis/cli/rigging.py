@@ -27,17 +27,75 @@ def cmd_transfer(args) -> int:
     return 0
 
 
+def _alpha_option(text):
+    """``--alpha``: ``auto`` or FIRST,LAST."""
+    return "auto" if str(text).strip().lower() == "auto" else pair_of_floats(text, "--alpha")
+
+
+def _cv_grid(values) -> tuple[float, ...]:
+    from ..errors import InputError
+
+    out = []
+    for v in values or ():
+        for part in str(v).split(","):
+            try:
+                a = float(part)
+            except ValueError:
+                a = float("nan")
+            if not (a > 0 and a < float("inf")):
+                raise InputError(f"--cv-grid: expected final alphas > 0, found {part!r}")
+            out.append(a)
+    return tuple(out)
+
+
+def _rig_options(args):
+    from ..rigging.generation import GenerationOptions
+
+    return GenerationOptions(iterations=args.iterations, alpha=_alpha_option(args.alpha),
+                             lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
+                             virtual_mode=args.virtual_mode, ipopt=args.ipopt, unobserved=args.unobserved,
+                             support=args.support, cv_folds=args.cv_folds, cv_grid=_cv_grid(args.cv_grid))
+
+
+def _progress(rec, total):
+    flag = "" if rec.ipopt_success else f"  [IPOPT: {rec.ipopt_status}]"
+    ipopt = f"IPOPT {rec.ipopt_iterations} it" if rec.ipopt_iterations else "certified"
+    print(f"  iteration {rec.iteration}/{total}: alpha {rec.alpha:.3g} lambda {rec.lam:.3g} "
+          f"E_fit {rec.e_fit:.4g} E_reg {rec.e_reg:.4g} weight objective {rec.weight_objective:.6g} "
+          f"({ipopt}, {rec.basis_seconds + rec.weight_seconds:.2f} s){flag}", flush=True)
+
+
+def _cv_progress(fold, alpha, error):
+    print(f"  cross-validation fold {fold + 1}: alpha {alpha:g} held-out error {error:.4f}", flush=True)
+
+
+def _warnings(result, options, names):
+    for h in result.history:
+        if not h.ipopt_success:
+            print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was replaced "
+                  "by the certified optimum (branch and bound)", file=sys.stderr)
+    for name in result.missing:
+        print(f"warning: training expression {name} keeps a relative residual of "
+              f"{result.residuals[names.index(name)]:.3f} > {options.missing_threshold}: the template "
+              "may lack a shape it needs (missing expression)", file=sys.stderr)
+
+
 def cmd_rig(args) -> int:
     from ..atomic import atomic_directory
+    from ..errors import InputError
     from ..geometry.rig import load_rig_folder, load_target_neutral
     from ..rigging.examples import load_examples, load_weights, parse_pairs
-    from ..rigging.generation import BlendshapeGenerator, GenerationOptions, GenerationProblem
+    from ..rigging.generation import BlendshapeGenerator, GenerationProblem
     from ..rigging.runs import write_rig_run
 
+    if args.resume is not None:
+        return _cmd_rig_resume(args)
+    absent = [f for f, v in (("--template", args.template), ("--target", args.target),
+                             ("--examples", args.examples), ("--weights", args.weights)) if v is None]
+    if absent:
+        raise InputError(f"rig: expected {', '.join(absent)} (or --resume RUN_DIR), found none")
     # everything is validated before any solving starts
-    options = GenerationOptions(iterations=args.iterations, alpha=pair_of_floats(args.alpha, "--alpha"),
-                                lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
-                                virtual_mode=args.virtual_mode)
+    options = _rig_options(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     names, examples = load_examples(args.examples, template)
@@ -45,28 +103,57 @@ def cmd_rig(args) -> int:
     ve = virtual_edges_for(args, template)
     pairs = parse_pairs(args.exclusive)
     problem = GenerationProblem(template, target, examples, X0, names, pairs, ve)
+    if options.auto_alpha and len(names) < options.cv_folds:
+        raise InputError(f"--alpha auto: expected at least {options.cv_folds} training expressions for "
+                         f"{options.cv_folds}-fold cross-validation (--cv-folds), found {len(names)}")
     print(f"template {template.n_shapes} shapes, {template.n_vertices} vertices; {len(names)} training "
           f"expressions; {describe_pairs(problem.exclusive, len(args.exclusive))}")
     gen = BlendshapeGenerator(problem, options)
-
-    def progress(rec, total):
-        flag = "" if rec.ipopt_success else f"  [IPOPT: {rec.ipopt_status}]"
-        print(f"  iteration {rec.iteration}/{total}: alpha {rec.alpha:.3g} lambda {rec.lam:.3g} "
-              f"E_fit {rec.e_fit:.4g} E_reg {rec.e_reg:.4g} weight objective {rec.weight_objective:.6g} "
-              f"(IPOPT {rec.ipopt_iterations} it, {rec.basis_seconds + rec.weight_seconds:.2f} s){flag}", flush=True)
-
-    result = gen.run(progress)
+    if gen.unobserved:
+        print(f"{len(gen.unobserved)} shape(s) without support in the examples (rough weights < {options.support:g}) "
+              f"keep their deformation transfer: {', '.join(gen.unobserved)}")
+    result = gen.run(_progress, cv_progress=_cv_progress if options.auto_alpha else None)
+    cv = result.crossval
+    if cv is not None:
+        print(f"--alpha auto: {len(cv.grid)} candidates x {len(cv.fold_errors)} folds in {cv.seconds:.1f} s; "
+              f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {min(cv.errors):.4f})")
+    sources = {"template": args.template, "neutral": args.neutral, "exclude": list(args.exclude),
+               "target": args.target}
     with atomic_directory(args.out) as stage:
-        write_rig_run(stage, result, options, problem, args.examples, args.weights)
-    failed = [h for h in result.history if not h.ipopt_success]
-    for h in failed:
-        print(f"warning: IPOPT returned {h.ipopt_status} at iteration {h.iteration}; its answer was replaced "
-              "by the certified optimum (branch and bound)", file=sys.stderr)
-    for name in result.missing:
-        print(f"warning: training expression {name} keeps a relative residual of "
-              f"{result.residuals[names.index(name)]:.3f} > {options.missing_threshold}: the template "
-              "may lack a shape it needs (missing expression)", file=sys.stderr)
+        write_rig_run(stage, result, options, problem, args.examples, args.weights, sources=sources)
+    _warnings(result, options, list(names))
     print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
+    return 0
+
+
+def _cmd_rig_resume(args) -> int:
+    from ..atomic import atomic_directory
+    from ..errors import InputError
+    from ..geometry.rig import load_rig_folder
+    from ..rigging.enrich import resume_run
+    from ..rigging.runs import write_rig_run
+
+    if args.alpha_given or args.lam_given or args.exclusive:
+        given = [f for f, v in (("--alpha", args.alpha_given), ("--lambda", args.lam_given),
+                                ("--exclusive", bool(args.exclusive))) if v]
+        raise InputError(f"--resume: expected the run's own schedule and pairs, found {', '.join(given)} "
+                         "(start a new run to change them)")
+    ve = None
+    if args.virtual_edges is not None:
+        if not args.template:
+            raise InputError("--virtual-edges with --resume: expected --template as well, found none")
+        ve = virtual_edges_for(args, load_rig_folder(args.template, args.neutral, args.exclude))
+    run = resume_run(args.resume, args.examples, args.weights, template=args.template,
+                     neutral=args.neutral if args.template else None, exclude=args.exclude, target=args.target,
+                     iterations=args.iterations_given, virtual_edges=ve, progress=_progress)
+    result = run.result
+    print(f"resumed {args.resume}: {run.n_previous} training expressions + {run.n_new} new"
+          + ("" if run.n_new else " (nothing new: the run's rig and weights are returned unchanged)"))
+    with atomic_directory(args.out) as stage:
+        write_rig_run(stage, result, run.options, run.problem, list(run.example_dirs), list(run.weight_files),
+                      sources=run.sources)
+    _warnings(result, run.options, list(run.problem.example_names))
+    print(f"generated {run.problem.template.n_shapes} blendshapes in {run.seconds:.2f} s -> {args.out}")
     return 0
 
 
@@ -108,9 +195,27 @@ def cmd_export(args) -> int:
     return 0
 
 
+def _cmd_rig_defaults(func, defaults):
+    """Fill the schedule flags' defaults after parsing, remembering which were given (``--resume``
+    keeps the run's own schedule and refuses new ones)."""
+    alpha = ",".join(f"{a:g}" for a in defaults.alpha)
+    lam = ",".join(f"{a:g}" for a in defaults.lam)
+
+    def run(args):
+        args.alpha_given, args.lam_given = args.alpha is not None, args.lam is not None
+        args.iterations_given = args.iterations
+        args.alpha = alpha if args.alpha is None else args.alpha
+        args.lam = lam if args.lam is None else args.lam
+        args.iterations = defaults.iterations if args.iterations is None else args.iterations
+        return func(args)
+
+    return run
+
+
 def register(sub) -> None:
     """Add this group's subcommands to the ``facebasis`` parser."""
-    from ..rigging.generation import GenerationOptions
+    from ..rigging.crossval import DEFAULT_GRID
+    from ..rigging.generation import IPOPT_MODES, UNOBSERVED_MODES, GenerationOptions
 
     defaults = GenerationOptions()
     alpha = ",".join(f"{a:g}" for a in defaults.alpha)
@@ -123,20 +228,43 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_transfer)
 
     p = sub.add_parser("rig", help="example-based blendshape generation (Gao et al. 2015)")
-    add_rig_folder_args(p)
-    p.add_argument("--target", required=True, help="target neutral mesh, template topology")
-    p.add_argument("--examples", required=True, help="folder of training expression meshes (names = file stems)")
-    p.add_argument("--weights", required=True, help='rough weights JSON: {"ex00": {"jawOpen": 0.8}}')
+    p.add_argument("--template", default=None, help="template rig folder (neutral + one mesh per blendshape)")
+    p.add_argument("--neutral", default="neutral.obj",
+                   help="file name of the neutral inside the rig folder (default neutral.obj)")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+    p.add_argument("--target", default=None, help="target neutral mesh, template topology")
+    p.add_argument("--examples", default=None, help="folder of training expression meshes (names = file stems)")
+    p.add_argument("--weights", default=None, help='rough weights JSON: {"ex00": {"jawOpen": 0.8}}')
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--iterations", type=int, default=defaults.iterations,
-                   help=f"alternations (default {defaults.iterations})")
-    p.add_argument("--alpha", default=alpha, help=f"alpha schedule FIRST,LAST (default {alpha})")
-    p.add_argument("--lambda", dest="lam", default=lam, help=f"lambda schedule FIRST,LAST (default {lam})")
+    p.add_argument("--iterations", type=int, default=None,
+                   help=f"alternations (default {defaults.iterations}; with --resume: alternations after the warm "
+                        "start, default 3)")
+    p.add_argument("--alpha", default=None,
+                   help=f"alpha schedule FIRST,LAST (default {alpha}), or 'auto': chosen by k-fold cross-validation "
+                        "over the training expressions (curve in crossval.json)")
+    p.add_argument("--lambda", dest="lam", default=None, help=f"lambda schedule FIRST,LAST (default {lam})")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")
+    p.add_argument("--ipopt", choices=IPOPT_MODES, default=defaults.ipopt,
+                   help="when the weight step also solves the CasADi/IPOPT model of eq. 5 (its answer seeds the "
+                        f"certified solver, whose optimum is the answer either way; default {defaults.ipopt})")
+    p.add_argument("--unobserved", choices=UNOBSERVED_MODES, default=defaults.unobserved,
+                   help="shapes whose rough weights stay below --support in every example: keep their deformation "
+                        f"transfer (weights held at 0) or fit them like the others (default {defaults.unobserved})")
+    p.add_argument("--support", type=float, default=defaults.support,
+                   help=f"rough weight a shape needs in some example to count as observed (default {defaults.support:g})")
+    p.add_argument("--cv-folds", type=int, default=defaults.cv_folds,
+                   help=f"folds of --alpha auto (default {defaults.cv_folds})")
+    p.add_argument("--cv-grid", action="extend", nargs="+", default=[], metavar="ALPHA",
+                   help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
+                        f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
+    p.add_argument("--resume", default=None, metavar="RUN_DIR",
+                   help="add the training expressions of --examples/--weights to this finished run and warm-start "
+                        "from its blendshapes and weights (template and target default to the run's)")
     add_virtual_edge_args(p)
-    p.set_defaults(func=cmd_rig)
+    p.set_defaults(func=_cmd_rig_defaults(cmd_rig, defaults))
 
     p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
     p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a `facebasis rig` output")

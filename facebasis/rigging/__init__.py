@@ -13,6 +13,8 @@ formulations   IPOPT formulations of complementarity compared against the certif
 examples       training inputs: example meshes, rough-weight files, exclusive pairs
 runs           writing a generation run as a rig folder (weights, history, residuals, glTF)
 verify         re-certify the stored weights of a run folder
+crossval       automatic regularisation: k-fold cross-validation of alpha (``alpha="auto"``)
+enrich         incremental enrichment: resume a finished run with more training expressions
 synthetic      person problems with known answers built from the built-in face
 
 May import :mod:`facebasis.contact` (the virtual-edge energy inside generation).

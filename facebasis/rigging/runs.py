@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 
+#: the cross-validation curve of ``alpha="auto"`` in a run folder (:mod:`facebasis.rigging.crossval`)
+CROSSVAL_FILE = "crossval.json"
+
 
 def history_to_json(result, options, problem) -> dict:
-    """The per-iteration history of a generation run with its options."""
-    opts = dataclasses.asdict(options)
+    """The per-iteration history of a generation run with its options (``alpha="auto"`` resolved
+    to the schedule it chose; the request is kept as ``alpha_requested``)."""
+    used = getattr(result, "options", None) or options
+    opts = dataclasses.asdict(used)
+    opts["alpha_requested"] = options.alpha if isinstance(options.alpha, str) else list(options.alpha)
     return {
         "options": opts,
+        "unobserved": list(getattr(result, "unobserved", ())),
         "exclusive": [list(p) for p in problem.exclusive],
         "examples": list(problem.example_names),
         "shapes": list(problem.template.names),
@@ -20,10 +27,13 @@ def history_to_json(result, options, problem) -> dict:
     }
 
 
-def write_rig_run(folder, result, options, problem, examples_dir, weights_file, relative_to=None) -> dict:
+def write_rig_run(folder, result, options, problem, examples_dir, weights_file, relative_to=None,
+                  sources=None) -> dict:
     """Write a generation run as `facebasis rig` writes it, into an existing (staging) folder:
     ``<shape>.obj`` + ``neutral.obj``, ``weights.json``, ``history.json``, ``residuals.json``,
-    ``inputs.json`` (for `facebasis verify`) and ``rig.glb``. Returns the history written."""
+    ``inputs.json`` (for `facebasis verify` and `facebasis rig --resume`), ``crossval.json``
+    (the cross-validation curve, with ``alpha="auto"``) and ``rig.glb``. ``examples_dir`` and
+    ``weights_file`` may be lists (a resumed run). Returns the history written."""
     from pathlib import Path
 
     from ..atomic import atomic_write_json
@@ -42,7 +52,12 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
         "threshold": options.missing_threshold,
         "relative_residual": dict(zip(names, map(float, result.residuals))),
         "missing": list(result.missing)})
-    write_inputs(folder, examples_dir, weights_file, problem.exclusive, options.schedule()[-1][1], relative_to)
+    used = getattr(result, "options", None) or options
+    write_inputs(folder, examples_dir, weights_file, problem.exclusive, used.schedule()[-1][1], relative_to,
+                 unobserved=getattr(result, "unobserved", ()), sources=sources)
+    cv = getattr(result, "crossval", None)
+    if cv is not None:
+        atomic_write_json(folder / CROSSVAL_FILE, cv.to_json())
     write_glb(result.rig, folder / "rig.glb")
     return history
 

@@ -82,21 +82,72 @@ class VerifyReport:
         return "\n".join(rows)
 
 
-def write_inputs(stage: Path, examples_dir, weights_file, exclusive, final_lambda: float, relative_to=None) -> None:
+def write_inputs(stage: Path, examples_dir, weights_file, exclusive, final_lambda: float, relative_to=None,
+                 unobserved=(), sources=None) -> None:
     """Record a run's inputs (``inputs.json``) so that :func:`verify_run` can re-solve it later.
 
+    ``examples_dir`` / ``weights_file``: one path each, or lists of paths (a resumed run's training
+    expressions come from several folders). ``unobserved``: shapes whose weights the run held at 0.
+    ``sources``: optional {"template", "neutral", "exclude", "target"} of the run (for ``--resume``).
     Paths are stored absolute, or relative to ``relative_to`` (the run folder's final location)
     when given, so a self-contained folder can be moved.
     """
     from ..atomic import atomic_write_json
 
     def rel(p):
+        if isinstance(p, (list, tuple)):
+            return [rel(q) for q in p]
         p = Path(p).resolve()
         return os.path.relpath(p, Path(relative_to).resolve()) if relative_to is not None else str(p)
 
-    atomic_write_json(stage / INPUTS_FILE, {"examples": rel(examples_dir), "weights": rel(weights_file),
-                                            "exclusive": [list(p) for p in exclusive],
-                                            "final_lambda": float(final_lambda)})
+    obj = {"examples": rel(examples_dir), "weights": rel(weights_file),
+           "exclusive": [list(p) for p in exclusive], "final_lambda": float(final_lambda),
+           "unobserved": list(unobserved)}
+    if sources:
+        obj["sources"] = {k: (rel(v) if k in ("template", "target") else v) for k, v in sources.items()}
+    atomic_write_json(stage / INPUTS_FILE, obj)
+
+
+def read_inputs(run_dir):
+    """``inputs.json`` of a run: (inputs dict, example folders, weight files) with paths resolved
+    against the run folder; raises :class:`InputError` naming what is missing."""
+    run = Path(run_dir)
+    path = run / INPUTS_FILE
+    if not path.is_file():
+        raise InputError(f"{run}: expected {INPUTS_FILE} (written by `facebasis rig`), found no such file")
+    try:
+        inputs = json.loads(path.read_text())
+        ex, wf = inputs["examples"], inputs["weights"]
+        inputs["exclusive"], inputs["final_lambda"] = inputs["exclusive"], float(inputs["final_lambda"])
+        ex, wf = ([ex] if isinstance(ex, str) else list(ex)), ([wf] if isinstance(wf, str) else list(wf))
+        if len(ex) != len(wf):
+            raise ValueError(f"{len(ex)} example folders, {len(wf)} weight files")
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: expected keys examples, weights, exclusive, final_lambda, found an unreadable "
+                         f"file ({exc})") from exc
+
+    def resolve(p):
+        return Path(p) if Path(p).is_absolute() else run / p
+
+    return inputs, [resolve(p) for p in ex], [resolve(p) for p in wf]
+
+
+def load_training(examples_dirs, weight_files, template):
+    """Training expressions and rough weights of several (folder, weights file) pairs, in order;
+    names must be unique across the folders. Returns (names, examples (m, n, 3), rough (m, k))."""
+    from .examples import load_examples, load_weights
+
+    names, T, X = [], [], []
+    for d, w in zip(examples_dirs, weight_files):
+        n, t = load_examples(d, template)
+        clash = sorted(set(n) & set(names))
+        if clash:
+            raise InputError(f"examples folder {d}: expected new training expression names, found names already "
+                             f"used: {clash}")
+        names += n
+        T.append(t)
+        X.append(load_weights(w, n, template.names))
+    return tuple(names), np.concatenate(T), np.concatenate(X)
 
 
 def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-8,
@@ -106,26 +157,20 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     ``check_pairs``: extra ``(shape_a, shape_b)`` pairs; for each, the report gives the largest
     product ``|x_a x_b|`` of the stored weights over all examples (:class:`PairCheck`), so a user
     can confirm that a constraint they meant to impose holds, whatever the run recorded."""
-    from .examples import load_examples, load_weights, parse_pairs
+    from .examples import load_weights, parse_pairs
     from ..geometry.rig import load_rig_folder
 
     run = Path(run_dir)
     path = run / INPUTS_FILE
-    if not path.is_file():
-        raise InputError(f"{run}: expected {INPUTS_FILE} (written by `facebasis rig`), found no such file")
-    try:
-        inputs = json.loads(path.read_text())
-        examples_dir, weights_file = inputs["examples"], inputs["weights"]
-        exclusive, lam = inputs["exclusive"], float(inputs["final_lambda"])
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{path}: expected keys examples, weights, exclusive, final_lambda, found an unreadable "
-                         f"file ({exc})") from exc
-    examples_dir = (run / examples_dir) if not Path(examples_dir).is_absolute() else Path(examples_dir)
-    weights_file = (run / weights_file) if not Path(weights_file).is_absolute() else Path(weights_file)
+    inputs, example_dirs, weight_files = read_inputs(run)
+    exclusive, lam = inputs["exclusive"], inputs["final_lambda"]
     rig = load_rig_folder(run, "neutral.obj")
-    names, T = load_examples(examples_dir, rig)
-    prior = load_weights(weights_file, names, rig.names)
+    names, T, prior = load_training(example_dirs, weight_files, rig)
     stored = load_weights(run / "weights.json", names, rig.names)
+    held = [str(s) for s in inputs.get("unobserved", [])]
+    free = np.ones(rig.n_shapes, bool)
+    if held:
+        free[rig.index(held, what=f"{path}: unobserved shapes")] = False
     run_pairs = parse_pairs([f"{a}:{b}" for a, b in exclusive])
     pairs = np.array([rig.index([a, b], what=f"{path}: exclusive pair {a}:{b}") for a, b in run_pairs],
                      dtype=np.int64).reshape(-1, 2)
@@ -139,10 +184,16 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     G = B @ B.T
     C = B @ targets.T
     out = []
-    certifier = CertifiedWeightSolver(G, pairs, lam)
+    # shapes the run held at 0 (no support in the examples) stay at 0: certify over the others
+    idx = np.flatnonzero(free)
+    pos = np.full(rig.n_shapes, -1)
+    pos[idx] = np.arange(len(idx))
+    sub_pairs = pos[pairs[(pos[pairs] >= 0).all(axis=1)]] if len(pairs) else pairs
+    certifier = CertifiedWeightSolver(G[np.ix_(idx, idx)], sub_pairs, lam)
     for j, name in enumerate(names):
         const = float(targets[j] @ targets[j])
-        cs = certifier.solve(C[:, j], const, prior[j], start=stored[j])
+        held_prior = lam * float(prior[j, ~free] @ prior[j, ~free])  # (0 - x~)^2 of the held weights
+        cs = certifier.solve(C[idx, j], const + held_prior, prior[j, idx], start=stored[j, idx])
         x = stored[j]
         f = weight_objective(x, G, C[:, j], const, prior[j], lam)
         comp = float(np.max(np.abs(x[pairs[:, 0]] * x[pairs[:, 1]]))) if len(pairs) else 0.0
@@ -161,4 +212,5 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     return VerifyReport(str(run), lam, tolerance, tuple(out), run_pairs, tuple(checked))
 
 
-__all__ = ["ExampleVerdict", "PairCheck", "VerifyReport", "verify_run", "write_inputs", "INPUTS_FILE"]
+__all__ = ["ExampleVerdict", "PairCheck", "VerifyReport", "verify_run", "write_inputs", "read_inputs",
+           "load_training", "INPUTS_FILE"]

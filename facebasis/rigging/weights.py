@@ -150,7 +150,7 @@ class WeightSolver:
         self._nlp = nlp
         self._solver = ca.nlpsol("weights", "ipopt", nlp, opts)
 
-    def solve(self, G, C, const, X_prior, lam: float, X0=None) -> WeightSolution:
+    def solve(self, G, C, const, X_prior, lam: float, X0=None, free=None) -> WeightSolution:
         """Solve eq. 5.
 
         Parameters
@@ -161,6 +161,7 @@ class WeightSolver:
         X_prior : (m, k) rough weights ``x~``
         lam : prior weight lambda >= 0
         X0 : (m, k) starting point (default: ``X_prior`` clipped to [0, 1])
+        free : optional (k,) bool, the weights that may be nonzero (the others are fixed at 0)
 
         Raises
         ------
@@ -182,8 +183,13 @@ class WeightSolver:
         if lam < 0:
             raise InputError(f"lambda: expected >= 0, found {lam}")
         x0 = np.clip(X_prior if X0 is None else X0, 0.0, 1.0)
+        ub = 1.0
+        if free is not None:
+            ub = np.broadcast_to(np.where(np.asarray(free, bool), 1.0, 0.0), (m, k))
+            x0 = np.minimum(x0, ub)
+            ub = ub.ravel()
         p = np.concatenate([G.ravel(order="F"), C.ravel(order="F"), X_prior.T.ravel(order="F"), [lam]])
-        args = {"x0": x0.ravel(), "p": p, "lbx": 0.0, "ubx": 1.0}
+        args = {"x0": x0.ravel(), "p": p, "lbx": 0.0, "ubx": ub}
         if self.n_constraints:
             args.update(lbg=0.0, ubg=0.0)
         with interruptible():  # IPOPT would turn Ctrl-C into a failure status and carry on
@@ -197,7 +203,7 @@ class WeightSolver:
         obj_ipopt = eq5_objective(X_ipopt, G, C, const, X_prior, lam)
         X, kkt, nodes, gap = X_ipopt, 0.0, 0, float("nan")
         if self.polish:
-            X, kkt, nodes, gap = self._polish(G, C, const, X_prior, lam, X_ipopt)
+            X, kkt, nodes, gap = certified_examples(G, C, const, X_prior, lam, self.pairs, start=X_ipopt, free=free)
         elif not ok:
             raise SolverError(f"weight step: IPOPT failed with status {status} after {iters} iterations", status)
         return WeightSolution(
@@ -211,17 +217,70 @@ class WeightSolver:
         )
 
     def _polish(self, G, C, const, X_prior, lam, X_ipopt):
-        """Certified global optimum of every example, starting from IPOPT's branch.
+        """Certified global optimum of every example, starting from IPOPT's branch
+        (:func:`certified_examples`). Returns weights, max KKT residual, total nodes, max gap."""
+        return certified_examples(G, C, const, X_prior, lam, self.pairs, start=X_ipopt)
 
-        :class:`~facebasis.rigging.certify.CertifiedWeightSolver` (branch and bound over the pairs, exact box-QPs)
-        seeded with IPOPT's answer: the result satisfies bounds and pairs exactly and is never worse
-        than IPOPT's. Returns weights, max KKT residual, total nodes and the max certificate gap.
-        """
-        X = np.empty_like(X_ipopt)
-        kkt, nodes, gap = 0.0, 0, 0.0
-        certifier = CertifiedWeightSolver(G, self.pairs, lam)  # shared by all examples of this step
-        for j in range(self.m):  # examples are independent given the blendshapes
-            cs = certifier.solve(C[:, j], const[j], X_prior[j], start=X_ipopt[j])
-            X[j] = cs.x
-            kkt, nodes, gap = max(kkt, cs.kkt_residual), nodes + cs.nodes, max(gap, cs.gap)
+
+def certified_examples(G, C, const, X_prior, lam, pairs, start=None, free=None):
+    """Certified global optimum of eq. 5 for every example (they are independent given G).
+
+    :class:`~facebasis.rigging.certify.CertifiedWeightSolver` (branch and bound over the pairs,
+    exact box-QPs), set up once for the shared G, lambda and pairs, optionally seeded per example
+    with ``start`` (m, k). ``free`` (k,) bool: only these weights may be nonzero (the others are
+    fixed at 0, their pairs hold trivially). Returns (weights (m, k), max KKT residual, total
+    nodes, max gap); the objective's constants (prior of the fixed weights) do not change the optimum.
+    """
+    k, m = C.shape
+    X = np.zeros((m, k))
+    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    idx = np.arange(k) if free is None else np.flatnonzero(free)
+    if len(idx) < k:
+        pos = np.full(k, -1)
+        pos[idx] = np.arange(len(idx))
+        P = pos[P[(pos[P] >= 0).all(axis=1)]] if len(P) else P
+        G, C = G[np.ix_(idx, idx)], C[idx]
+        X_prior = X_prior[:, idx]
+        start = None if start is None else start[:, idx]
+    kkt, nodes, gap = 0.0, 0, 0.0
+    if len(idx) == 0:
         return X, kkt, nodes, gap
+    certifier = CertifiedWeightSolver(G, P, lam)  # shared by all examples of this step
+    for j in range(m):  # examples are independent given the blendshapes
+        cs = certifier.solve(C[:, j], const[j], X_prior[j], start=None if start is None else start[j])
+        X[j, idx] = cs.x
+        kkt, nodes, gap = max(kkt, cs.kkt_residual), nodes + cs.nodes, max(gap, cs.gap)
+    return X, kkt, nodes, gap
+
+
+#: ``WeightSolution.ipopt_status`` of a weight step that did not run IPOPT
+IPOPT_NOT_RUN = "not run"
+
+
+def solve_certified(G, C, const, X_prior, lam: float, pairs=(), free=None) -> WeightSolution:
+    """Eq. 5 by the certified solver alone (no IPOPT): the global optimum of every example.
+
+    The answer is what :meth:`WeightSolver.solve` returns after its polish (the certified optimum
+    does not depend on IPOPT's seed), without the joint IPOPT solve; the IPOPT fields of the
+    solution say so (status :data:`IPOPT_NOT_RUN`, 0 iterations, NaN objective and violations,
+    ``ipopt_success`` True since nothing failed). ``free``: see :func:`certified_examples`.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    G, C = np.asarray(G, float), np.asarray(C, float)
+    X_prior, const = np.asarray(X_prior, float), np.asarray(const, float)
+    k, m = C.shape
+    if G.shape != (k, k) or X_prior.shape != (m, k) or const.shape != (m,):
+        raise InputError(f"weight step: expected G {(k, k)}, prior {(m, k)}, const {(m,)}, found "
+                         f"{G.shape}, {X_prior.shape}, {const.shape}")
+    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    X, kkt, nodes, gap = certified_examples(G, C, const, X_prior, lam, P, free=free)
+    nan = float("nan")
+    return WeightSolution(
+        weights=X, objective=eq5_objective(X, G, C, const, X_prior, lam), ipopt_status=IPOPT_NOT_RUN,
+        ipopt_iterations=0, ipopt_success=True, ipopt_weights=np.full_like(X, nan), ipopt_objective=nan,
+        max_complementarity=complementarity_violation(X, P), max_bound_violation=bound_violation(X),
+        ipopt_max_complementarity=nan, ipopt_max_bound_violation=nan, kkt_residual=kkt, polished=True,
+        certificate_nodes=nodes, certificate_gap=gap, seconds=time.perf_counter() - t0,
+    )

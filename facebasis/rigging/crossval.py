@@ -1,0 +1,166 @@
+"""Automatic regularisation of example-based generation: k-fold cross-validation of alpha.
+
+``GenerationOptions(alpha="auto")`` (``facebasis rig --alpha auto``) chooses the alpha schedule of
+eq. 4 (Gao et al. 2015) from the training expressions themselves:
+
+* the training expressions are split into ``cv_folds`` interleaved folds (example j in fold
+  ``j mod K``);
+* for every fold, a rig is generated from the other folds for every candidate final alpha ``a``
+  of ``cv_grid`` (the schedule ``(5 a, a)``, the paper's ratio 0.5 -> 0.1): the candidates are
+  visited from the largest (close to plain deformation transfer) to the smallest, the first with
+  the full schedule, each next one warm-started from the previous one's weights with
+  ``cv_chain_iterations`` alternations at its own final alpha (a continuation, as the paper's
+  schedule itself is);
+* each rig is scored on the held-out fold by refitting weights (bounds + complementarity, no
+  prior; the certified optimum) and measuring ``||B_0 + B x - T|| / ||T - B_0||``;
+* the curve is the error pooled over the folds per candidate; the smallest wins.
+
+All folds share the template's precompute (transfer, prior, regulariser weights) through
+:meth:`~facebasis.rigging.generation.BlendshapeGenerator.subset`; the weight steps of the
+cross-validation use the certified solver only (IPOPT would give the same optimum, slower).
+
+References
+----------
+- Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
+    (基于样例的面部表情基生成). Computer Engineering 41(3): 258-261, 2015. Equation numbers
+    "eq. N" in this module are this paper's unless another paper is named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ..errors import InputError
+from .weights import solve_certified
+
+#: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect)
+DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
+
+#: ratio first/last alpha of a candidate schedule (the paper's 0.5 -> 0.1)
+SCHEDULE_RATIO = 5.0
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """The cross-validation curve behind ``alpha="auto"``.
+
+    grid : candidate final alphas (ascending); errors : pooled held-out relative error per
+    candidate; fold_errors : (folds, candidates) per fold; best_alpha, schedule : the choice and
+    its schedule (first, last); folds : fold of every training expression; seconds : wall time;
+    rigs_generated : rigs built (folds x candidates).
+    """
+
+    grid: tuple[float, ...]
+    errors: tuple[float, ...]
+    fold_errors: tuple[tuple[float, ...], ...]
+    best_alpha: float
+    schedule: tuple[float, float]
+    folds: tuple[int, ...]
+    chain_iterations: int
+    seconds: float
+    cpu_seconds: float
+
+    @property
+    def rigs_generated(self) -> int:
+        return len(self.fold_errors) * len(self.grid)
+
+    def to_json(self) -> dict:
+        return {"method": "k-fold cross-validation of the final alpha (schedule 5a -> a), held-out error with "
+                          "refitted weights (bounds + complementarity, no prior)",
+                "grid": list(self.grid), "errors": list(self.errors),
+                "fold_errors": [list(r) for r in self.fold_errors], "best_alpha": self.best_alpha,
+                "schedule": list(self.schedule), "folds": list(self.folds),
+                "chain_iterations": self.chain_iterations, "seconds": self.seconds,
+                "cpu_seconds": self.cpu_seconds}
+
+
+def heldout_error_parts(rig, expressions, pairs=()) -> tuple[float, float]:
+    """(``||B_0 + B x - T||^2``, ``||T - B_0||^2``) summed over expressions (h, n, 3), with weights
+    refitted by the certified solver (bounds + complementarity, no prior): the terms of
+    :func:`~facebasis.rigging.generation.reproduction_error`."""
+    T = (np.asarray(expressions, np.float64) - rig.neutral).reshape(len(expressions), -1)
+    B = rig.deltas.reshape(rig.n_shapes, -1)
+    with threadpool_limits(1):
+        G, C = B @ B.T, B @ T.T
+    const = np.einsum("ij,ij->i", T, T)
+    sol = solve_certified(G, C, const, np.zeros((len(T), rig.n_shapes)), 0.0, pairs)
+    return max(float(sol.objective), 0.0), float(const.sum())
+
+
+def heldout_error(rig, expressions, pairs=()) -> float:
+    """Relative reproduction error of ``expressions`` by ``rig`` with refitted weights (certified)."""
+    num, den = heldout_error_parts(rig, expressions, pairs)
+    return float(np.sqrt(num / den))
+
+
+def fold_labels(m: int, folds: int) -> np.ndarray:
+    """Interleaved folds: training expression j in fold ``j mod folds``."""
+    return np.arange(m) % folds
+
+
+def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_iterations: int | None = None,
+                         progress=None) -> CrossValidation:
+    """Choose the final alpha by k-fold cross-validation (module docstring) on ``generator``'s problem.
+
+    Parameters
+    ----------
+    generator : :class:`~facebasis.rigging.generation.BlendshapeGenerator` of all training expressions
+    grid, folds, chain_iterations : default to the generator's options (``cv_grid`` or
+        :data:`DEFAULT_GRID`, ``cv_folds``, ``cv_chain_iterations``)
+    progress : optional callable(fold, alpha, error) after every rig
+
+    Raises
+    ------
+    InputError
+        fewer training expressions than folds (before any solving)
+    """
+    t0, c0 = time.perf_counter(), time.process_time()
+    opts = generator.options
+    grid = tuple(sorted(float(a) for a in (grid or opts.cv_grid or DEFAULT_GRID)))
+    folds = int(folds or opts.cv_folds)
+    chain = int(chain_iterations or opts.cv_chain_iterations)
+    m = len(generator.problem.examples)
+    if m < folds:
+        raise InputError(f"--alpha auto: expected at least {folds} training expressions for {folds}-fold "
+                         f"cross-validation, found {m}")
+    if any(a <= 0 for a in grid):
+        raise InputError(f"cv_grid: expected final alphas > 0, found {grid}")
+    labels = fold_labels(m, folds)
+    lam_last = float(opts.lam[1])
+    # the cross-validation's own runs: certified weights only, the candidate's schedule
+    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never")
+    num = np.zeros((folds, len(grid)))
+    den = np.zeros(folds)
+    pairs = generator.pairs
+    for f in range(folds):
+        train, held = np.flatnonzero(labels != f), np.flatnonzero(labels == f)
+        sub = generator.subset(train).with_options(base)
+        T_held = generator.problem.examples[held]
+        X = None
+        for c in range(len(grid) - 1, -1, -1):  # largest alpha first, then continue downwards
+            a = grid[c]
+            if X is None:
+                res = sub.with_options(dataclasses.replace(base, alpha=(SCHEDULE_RATIO * a, a))).run()
+            else:
+                res = sub.run(X0=X, schedule=[(a, lam_last)] * chain)
+            X = res.weights
+            num[f, c], den[f] = heldout_error_parts(res.rig, T_held, pairs)
+            if progress is not None:
+                progress(f, a, float(np.sqrt(num[f, c] / den[f])))
+    errors = np.sqrt(num.sum(0) / den.sum())
+    best = int(np.argmin(errors))
+    a = grid[best]
+    return CrossValidation(grid=grid, errors=tuple(map(float, errors)),
+                           fold_errors=tuple(tuple(map(float, np.sqrt(num[f] / den[f]))) for f in range(folds)),
+                           best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
+                           chain_iterations=chain, seconds=time.perf_counter() - t0,
+                           cpu_seconds=time.process_time() - c0)
+
+
+__all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",
+           "DEFAULT_GRID", "SCHEDULE_RATIO"]

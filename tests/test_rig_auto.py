@@ -1,0 +1,142 @@
+"""§4: --alpha auto (k-fold cross-validation of alpha), unobserved shapes, the options' error branches."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from conftest import write_rig_inputs
+from facebasis.cli import main
+from facebasis.errors import InputError
+from facebasis.geometry.transfer import deformation_transfer
+from facebasis.rigging.crossval import cross_validate_alpha, heldout_error
+from facebasis.rigging.generation import (BlendshapeGenerator, GenerationOptions, GenerationProblem,
+                                          generate_blendshapes, reproduction_error)
+from facebasis.rigging.synthetic import default_face_problem, make_person_problem
+from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
+
+GRID = (0.001, 1000.0)
+
+
+def _transfer_is_truth_problem(noise):
+    """Training expressions of the deformation transfer itself plus vertex noise: transfer
+    (the largest alpha) is exactly right, a small alpha fits the noise."""
+    pp = default_face_problem(seed=0, n_train=9)
+    p = pp.problem
+    dt = deformation_transfer(p.template, p.target_neutral)
+    truth = make_person_problem(p.template, dt, EXCLUSIVE_PAIRS, 9, 6, 0.3, seed=0)
+    rng = np.random.default_rng(0)
+    scale = noise * np.abs(dt.deltas).max()
+    noisy = dataclasses.replace(truth.problem, examples=truth.problem.examples + rng.normal(0, scale, truth.problem.examples.shape))
+    return noisy, truth
+
+
+def test_auto_alpha_picks_transfer_when_transfer_is_the_truth():
+    problem, truth = _transfer_is_truth_problem(0.05)
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID, unobserved="fit")
+    res = generate_blendshapes(problem, opts)
+    cv = res.crossval
+    assert cv.grid == GRID and cv.best_alpha == 1000.0 and cv.errors[1] < cv.errors[0]
+    assert res.options.alpha == (5000.0, 1000.0) and res.history[-1].alpha == pytest.approx(1000.0)
+    assert len(cv.fold_errors) == 3 and len(cv.folds) == 9
+
+
+def test_auto_alpha_picks_the_small_alpha_when_the_person_differs_from_transfer():
+    pp = default_face_problem(seed=0, n_train=9)
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID)
+    cv = cross_validate_alpha(BlendshapeGenerator(pp.problem, opts))
+    assert cv.best_alpha == 0.001 and cv.errors[0] < cv.errors[1]
+    # the curve is what it claims: the held-out error of the chosen schedule's rig on fold 0
+    gen = BlendshapeGenerator(pp.problem, dataclasses.replace(opts, alpha=(1000.0 * 5, 1000.0), ipopt="never"))
+    train, held = np.flatnonzero(np.array(cv.folds) != 0), np.flatnonzero(np.array(cv.folds) == 0)
+    rig = gen.subset(train).run().rig
+    assert heldout_error(rig, pp.problem.examples[held], pp.problem.pair_indices) == pytest.approx(
+        cv.fold_errors[0][1], rel=1e-9)
+
+
+def test_heldout_error_equals_reproduction_error():
+    pp = default_face_problem(seed=1, n_train=6)
+    rig = deformation_transfer(pp.problem.template, pp.problem.target_neutral)
+    assert heldout_error(rig, pp.heldout, pp.problem.pair_indices) == pytest.approx(
+        reproduction_error(rig, pp.heldout, pp.problem.pair_indices), rel=1e-7)
+
+
+def test_unobserved_shape_keeps_its_transfer_and_zero_weights():
+    pp = default_face_problem(seed=0, n_train=10)  # mouthSmile_L: no training expression uses it
+    p = pp.problem
+    i = p.template.names.index("mouthSmile_L")
+    assert pp.true_weights[:, i].max() == 0
+    gen = BlendshapeGenerator(p, GenerationOptions(iterations=3))
+    assert gen.unobserved == ("mouthSmile_L",)
+    res = gen.run()
+    dt = deformation_transfer(p.template, p.target_neutral)
+    assert np.abs(res.weights[:, i]).max() == 0.0
+    assert np.linalg.norm(res.rig.deltas[i] - dt.deltas[i]) <= 1e-6 * np.linalg.norm(dt.deltas[i])
+    fit = generate_blendshapes(p, GenerationOptions(iterations=3, unobserved="fit"))
+    assert fit.unobserved == () and fit.weights[:, i].max() > 0
+
+
+def test_rig_cli_alpha_auto_writes_the_curve(tmp_path, capsys):
+    root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=6))
+    code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
+                 "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
+                 "--out", str(root / "auto"), "--iterations", "2", "--alpha", "auto", "--cv-folds", "2",
+                 "--cv-grid", "0.01", "--cv-grid", "1,100"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "--alpha auto: 3 candidates x 2 folds" in out
+    cv = json.loads((root / "auto" / "crossval.json").read_text())
+    assert cv["grid"] == [0.01, 1.0, 100.0] and len(cv["errors"]) == 3 and cv["best_alpha"] in cv["grid"]
+    hist = json.loads((root / "auto" / "history.json").read_text())
+    assert hist["options"]["alpha_requested"] == "auto"
+    assert hist["options"]["alpha"] == [5 * cv["best_alpha"], cv["best_alpha"]]
+    assert main(["verify", str(root / "auto")]) == 0
+
+
+@pytest.mark.parametrize("kw,message", [
+    ({"alpha": "bogus"}, r"alpha: expected two numbers \(first, last\) or 'auto', found 'bogus'"),
+    ({"ipopt": "sometimes"}, r"ipopt: expected one of every, final, never, found 'sometimes'"),
+    ({"unobserved": "drop"}, r"unobserved: expected one of transfer, fit, found 'drop'"),
+    ({"support": 1.5}, r"support: expected a rough weight in \[0, 1\], found 1.5"),
+    ({"cv_folds": 1}, r"cv_folds: expected >= 2, found 1"),
+    ({"cv_chain_iterations": 0}, r"cv_chain_iterations: expected >= 1, found 0"),
+    ({"cv_grid": (0.1, -1.0)}, r"cv_grid: expected final alphas > 0, found \(0.1, -1.0\)"),
+    ({"polish": False}, r"polish: expected True unless ipopt='every' \(IPOPT's raw answers\), found polish=False "
+                        r"with ipopt='final'"),
+])
+def test_option_errors(kw, message):
+    with pytest.raises(InputError, match=message):
+        GenerationOptions(**kw)
+
+
+def test_auto_alpha_needs_as_many_examples_as_folds():
+    pp = default_face_problem(seed=0, n_train=3)
+    gen = BlendshapeGenerator(pp.problem, GenerationOptions(alpha="auto"))
+    with pytest.raises(InputError, match=r"--alpha auto: expected at least 4 training expressions for 4-fold "
+                                         r"cross-validation, found 3"):
+        gen.run()
+    with pytest.raises(InputError, match=r"alpha: 'auto' has no schedule before cross-validation"):
+        GenerationOptions(alpha="auto").schedule()
+
+
+@pytest.mark.parametrize("extra,message", [
+    (["--alpha", "auto"], r"--alpha auto: expected at least 4 training expressions for 4-fold cross-validation "
+                          r"\(--cv-folds\), found 3"),
+    (["--cv-grid", "0.1", "x"], r"--cv-grid: expected final alphas > 0, found 'x'"),
+    (["--cv-grid", "-1"], r"--cv-grid: expected final alphas > 0, found '-1'"),
+])
+def test_rig_cli_errors_before_solving(tmp_path, capsys, extra, message):
+    root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=3))
+    code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
+                 "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
+                 "--out", str(root / "o"), *extra])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert __import__("re").search(message, err), err
+    assert not (root / "o").exists()
+
+
+def test_rig_cli_without_inputs_names_them(tmp_path, capsys):
+    assert main(["rig", "--out", str(tmp_path / "o"), "--target", "t.obj"]) == 2
+    assert "rig: expected --template, --examples, --weights (or --resume RUN_DIR), found none" in capsys.readouterr().err

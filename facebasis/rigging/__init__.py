@@ -1,13 +1,16 @@
 """Example-based blendshape generation: a template rig made personal from a few example expressions.
 
 Alternates a basis step (deformation-gradient space, sparse least squares, eq. 2-4 of Gao et al.)
-and a weight step (CasADi + IPOPT with bounds, a prior and complementarity ``x_a x_b = 0``, eq. 5),
-each weight step certified globally optimal by branch and bound.
+and a weight step (bounds, a prior and complementarity ``x_a x_b = 0``, eq. 5) solved to certified
+global optima by branch and bound, with the CasADi + IPOPT model of eq. 5 as a recorded
+cross-check.
 
 Modules
 -------
-generation     the problem, options, basis step and the alternating generator
-weights        the eq. 5 weight step in CasADi, solved by IPOPT, polished by the certified solver
+problem        the generation problem, its options and its result
+basis          the basis step (eq. 2-4), vectorised over triangles, and its array layouts
+generation     precompute once, alternate the steps (``BlendshapeGenerator``, ``generate_blendshapes``)
+weights        the eq. 5 weight step: the certified solver and the CasADi/IPOPT model
 certify        exact box QPs and branch and bound over exclusive pairs (certified optima)
 formulations   IPOPT formulations of complementarity compared against the certified optimum
 examples       training inputs: example meshes, rough-weight files, exclusive pairs

@@ -160,3 +160,19 @@ def test_rig_with_virtual_edges(rig_inputs, capsys):
         assert res["relative_residual"] != plain["relative_residual"]
     hist = json.loads((root / "ve_run" / "history.json").read_text())
     assert hist["options"]["virtual_weight"] == 1.0 and hist["options"]["virtual_mode"] == "proportional"
+
+
+def test_rig_says_what_it_does_with_a_single_alpha_and_with_pairs_used_together(rig_inputs, tmp_path, capsys):
+    root, _ = rig_inputs
+    w = json.loads((root / "weights.json").read_text())
+    w["ex00"].update({"mouthLeft": 0.3, "mouthRight": 0.4})
+    w["ex01"].update({"mouthLeft": 0.2, "mouthRight": 0.1})
+    w["ex02"].pop("mouthLeft", None)
+    (tmp_path / "w.json").write_text(json.dumps(w))
+    code = main(args(root, **{"--out": tmp_path / "o", "--weights": tmp_path / "w.json", "--alpha": "0.3",
+                              "--iterations": "1"}) + ["--exclusive", "mouthLeft:mouthRight"])
+    assert code == 0
+    out, err = capsys.readouterr()
+    assert "note: --alpha 0.3 is one number: held constant over all iterations" in out
+    line = next(s for s in err.splitlines() if s.startswith("warning: exclusive pair mouthLeft:mouthRight"))
+    assert "ex00" in line and "ex01" in line and "ex02" not in line

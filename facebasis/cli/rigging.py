@@ -108,6 +108,15 @@ def cmd_rig(args) -> int:
                          f"{options.cv_folds}-fold cross-validation (--cv-folds), found {len(names)}")
     print(f"template {template.n_shapes} shapes, {template.n_vertices} vertices; {len(names)} training "
           f"expressions; {describe_pairs(problem.exclusive, len(args.exclusive))}")
+    for text, name in ((args.alpha, "--alpha"), (args.lam, "--lambda")):
+        if text is not None and str(text).strip().lower() != "auto" and "," not in str(text):
+            print(f"note: {name} {text} is one number: held constant over all iterations (FIRST,LAST gives a schedule)")
+    for (a, b), (ia, ib) in zip(problem.exclusive, problem.pair_indices):
+        both = [n for n, row in zip(names, X0) if row[ia] > 0 and row[ib] > 0]
+        if both:
+            print(f"warning: exclusive pair {a}:{b}: the rough weights of {len(both)} example(s) use both shapes "
+                  f"({', '.join(both[:5])}{', ...' if len(both) > 5 else ''}); the weight step will keep only one "
+                  "of them in each", file=sys.stderr)
     gen = BlendshapeGenerator(problem, options)
     if gen.unobserved:
         print(f"{len(gen.unobserved)} shape(s) without support in the examples (rough weights < {options.support:g}) "

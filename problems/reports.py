@@ -59,13 +59,26 @@ def _error_maps(pp, generated, out: Path, data: str) -> list[Path]:
     return paths
 
 
-def _crop(V, mask, view="front", pad=0.25):
+def _crop(Vs, mask, view="front", pad=0.12):
+    """A crop around the zone ``mask`` over every mesh of ``Vs`` (the neutral and the shown
+    expressions, so that an opened jaw stays in the frame)."""
     from facebasis.report.render import project
 
-    P = project(V[mask], view)
-    lo, hi = P[:, :2].min(0), P[:, :2].max(0)
+    P = np.concatenate([project(V[mask], view) for V in Vs])
+    # 1st-99th percentile: a few far zone vertices (e.g. deep in a mouth socket) do not widen the crop
+    lo, hi = np.percentile(P[:, :2], 1, axis=0), np.percentile(P[:, :2], 99, axis=0)
     m = pad * float((hi - lo).max())
     return (view, ((lo[0] - m, hi[0] + m), (lo[1] - m, hi[1] + m)))
+
+
+def _vertex_mask(zone, n: int) -> np.ndarray:
+    """A zone given as a boolean mask or as vertex indices, as a boolean mask of n vertices."""
+    zone = np.asarray(zone)
+    if zone.dtype == bool:
+        return zone
+    mask = np.zeros(n, bool)
+    mask[zone.astype(np.int64)] = True
+    return mask
 
 
 def _penetration(data: str, out: Path) -> list[Path]:
@@ -120,12 +133,24 @@ def _penetration(data: str, out: Path) -> list[Path]:
     paths = write_table(out, "penetration", ("expression", "new pairs, plain transfer", "new pairs, virtual edges",
                                              "layer crossings, plain", "layer crossings, virtual edges"), rows)
     arrays["names"] = [n for n in show if f"{n}/plain" in arrays]
-    arrays["crops"] = {"lips": _crop(template.neutral, zones["lips"]), "lids": _crop(template.neutral, zones["lids"])}
+    shown = [template.neutral] + [arrays[f"{n}/{k}"] for n in arrays["names"] for k in ("plain", "ve")]
+    arrays["crops"] = {z: _crop(shown, zones[z]) for z in ("lips", "lids")}
+    # the triangles of each zone (a corner in it): each close-up counts its own zone's triangles
+    arrays["zone_faces"] = {z: np.flatnonzero(np.asarray(_vertex_mask(zones[z], len(target)))[F].any(1))
+                            for z in ("lips", "lids")}
     paths += penetration_figure(arrays, out)
     print(f"  penetration ({label}): {total[0]} new intersecting pairs with plain transfer, {total[1]} with "
           f"virtual edges ({len(ve)} edges); layer crossings (triangles >= {LOCAL_FOLD_EDGES:g} median edges apart along the target "
           f"neutral) {total[2]} and {total[3]}")
     return paths
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the working folder when inside it, else as given."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def main(argv=None) -> int:
@@ -157,7 +182,9 @@ def main(argv=None) -> int:
     print("run: example-based generation, default options")
     pp = person_problem(args.data, seeds[0])
     run, generated = _run_folder(pp, out)
-    report_run(run, out / "run_report")
+    # ICT renders (faces) go to reports/ict/renders/ (not committed, see .gitignore) and stay out of
+    # the committed index; the built-in face's renders are part of the report
+    report_run(run, out / "run_report", renders_dir=out / "renders" if args.data == "ict" else None)
     _error_maps(pp, generated, out, args.data)
     print("formulations: weight-step suite")
     from facebasis.rigging.formulations import compare_formulations
@@ -166,7 +193,7 @@ def main(argv=None) -> int:
     formulation_report(compare_formulations(weight_suite(args.data)), out)
     print("penetration")
     _penetration(args.data, out)
-    print(f"reports/{args.data} regenerated in {time.perf_counter() - t0:.0f} s -> {out}")
+    print(f"{_shown(out)} regenerated ({args.data} data) in {time.perf_counter() - t0:.0f} s")
     return 0
 
 

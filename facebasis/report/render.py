@@ -28,7 +28,8 @@ HIGHLIGHT2_RGB = np.array([1.0, 0.6, 0.0])    # orange
 
 
 def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vmax=None,
-              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72), highlight2=None):
+              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72), highlight2=None,
+              rasterized=True):
     """Draw a shaded mesh into a matplotlib axis (camera looks along -z after the view rotation).
 
     Parameters
@@ -40,7 +41,11 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     face_mask : optional (m,) bool, triangles to draw
     highlight : optional (m,) bool, triangles drawn in red (e.g. intersecting ones)
     highlight2 : optional (m,) bool, triangles drawn in orange (e.g. local folds); red wins where both
-    crop : optional ((xmin, xmax), (ymin, ymax)) in view coordinates
+    crop : optional ((xmin, xmax), (ymin, ymax)) in view coordinates: the axis shows exactly this
+        rectangle (triangles with a corner inside it are drawn and clipped at its border, so the
+        edges of the crop are straight)
+    rasterized : draw the triangles as an image in vector outputs (PDF/SVG stay small; text and
+        colour bars stay vector)
 
     Returns
     -------
@@ -63,8 +68,8 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     depth = tri[:, :, 2].mean(1)
     if crop is not None:
         (x0, x1), (y0, y1) = crop
-        c = tri.mean(1)
-        keep &= (c[:, 0] > x0) & (c[:, 0] < x1) & (c[:, 1] > y0) & (c[:, 1] < y1)
+        inside = (tri[:, :, 0] > x0) & (tri[:, :, 0] < x1) & (tri[:, :, 1] > y0) & (tri[:, :, 1] < y1)
+        keep &= inside.any(1)
     order = np.flatnonzero(keep)[np.argsort(depth[keep], kind="stable")]
     if values is not None:
         vals = np.asarray(values, float)[F].mean(1)
@@ -81,11 +86,15 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     if highlight is not None:
         rgb[np.asarray(highlight, bool)] = HIGHLIGHT_RGB
     coll = PolyCollection(tri[order][:, :, :2], facecolors=np.clip(rgb[order], 0, 1),
-                          edgecolors="none", linewidths=0, antialiased=False)
+                          edgecolors="none", linewidths=0, antialiased=False, rasterized=rasterized)
     ax.add_collection(coll)
-    pts = tri[order][:, :, :2].reshape(-1, 2) if len(order) else P[:, :2]
-    ax.set_xlim(pts[:, 0].min(), pts[:, 0].max())
-    ax.set_ylim(pts[:, 1].min(), pts[:, 1].max())
+    if crop is not None:
+        ax.set_xlim(*crop[0])
+        ax.set_ylim(*crop[1])
+    else:
+        pts = tri[order][:, :, :2].reshape(-1, 2) if len(order) else P[:, :2]
+        ax.set_xlim(pts[:, 0].min(), pts[:, 0].max())
+        ax.set_ylim(pts[:, 1].min(), pts[:, 1].max())
     ax.set_aspect("equal")
     ax.axis("off")
     return mapper if mapper is not None else coll

@@ -1,0 +1,181 @@
+"""Paper figures and report folders: units on every axis and colour bar, every series in a legend,
+legends off the data, fonts >= 8 pt (facebasis.report.figures.lint_figure on every figure written),
+the rig report's tables and index."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facebasis.report import figures
+
+
+@pytest.fixture
+def linted(monkeypatch):
+    """Every figure saved during the test is checked; yields {file stem: [problems]} and
+    {file stem: [axes titles]}."""
+    problems, titles = {}, {}
+
+    def hook(fig, path):
+        problems[path.stem] = figures.lint_figure(fig)
+        titles[path.stem] = [ax.get_title() for ax in fig.axes]
+
+    monkeypatch.setattr(figures, "SAVE_HOOKS", [hook])
+    return problems, titles
+
+
+@pytest.fixture(scope="module")
+def rig_run(tmp_path_factory):
+    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.runs import write_problem_inputs, write_rig_run
+    from facebasis.rigging.synthetic import default_face_problem
+
+    root = tmp_path_factory.mktemp("run")
+    p = default_face_problem(seed=0, n_train=4).problem
+    options = GenerationOptions(iterations=2, threads=1)
+    res = generate_blendshapes(p, options)
+    run = root / "run"
+    run.mkdir()
+    examples_dir, weights_file = write_problem_inputs(root / "inputs", p)
+    write_rig_run(run, res, options, p, examples_dir, weights_file, relative_to=run)
+    return run
+
+
+def test_lint_catches_missing_units_legends_and_small_fonts():
+    plt = figures._pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label="a")
+    ax.plot([0, 1], [1, 0], label="b")
+    ax.legend(["a"], loc="center")  # b missing; the legend sits on the crossing of the lines
+    ax.set_xlabel("time")           # no unit
+    ax.set_title("small", fontsize=6)
+    found = " | ".join(figures.lint_figure(fig))
+    plt.close(fig)
+    assert "x label 'time' has no (unit)" in found and "y axis has ticks but no label" in found
+    assert "series 'b' is in no legend" in found and "legend covers" in found and "'small' is 6.0 pt" in found
+    fig, ax = plt.subplots()
+    ax.semilogy([1, 2], [1e-3, 1e2])  # mathtext tick labels (10^-2) are numbers too
+    ax.set_xlabel("x (cm)")
+    ax.set_ylabel("energy")
+    found = figures.lint_figure(fig)
+    plt.close(fig)
+    assert found == ["axes 0 (?): y label 'energy' has no (unit)"]
+
+
+def test_rig_report_figures_tables_and_index(rig_run, tmp_path, linted):
+    from facebasis.report.run_report import report_run
+
+    problems, _ = linted
+    out = tmp_path / "report"
+    paths = report_run(rig_run, out, formats=("pdf",))  # PDF only: the PNG path is the same code, and slow
+    assert {"convergence", "weights", "residuals", "shapes"} <= set(problems)
+    assert all(not v for v in problems.values()), problems
+    names = {p.name for p in paths}
+    for stem in ("convergence", "weights", "residuals", "shapes"):
+        assert f"{stem}.pdf" in names
+    for table in ("history", "residuals_table", "weights_table"):
+        assert (out / f"{table}.csv").is_file() and (out / f"{table}.md").is_file()
+    history = (out / "history.csv").read_text().splitlines()
+    assert history[0].startswith("iteration,alpha,lambda (cm²),E_fit (cm²)") and len(history) == 3
+    weights = (out / "weights_table.csv").read_text().splitlines()
+    assert len(weights) == 5 and weights[0].startswith("example,")
+    index = (out / "index.md").read_text()
+    assert index.startswith("# Rig run report: `../../") and "## Key numbers" in index and "E_fit" in index
+    assert str(tmp_path) not in index and "/" + tmp_path.parts[1] not in index  # no absolute path
+    linked = re.findall(r"\]\(([^)]+)\)", index)
+    assert set(linked) == {p.name for p in out.iterdir() if p.name != "index.md"}
+    assert all((out / f).is_file() for f in linked)
+    assert "shapes.pdf" in linked and "convergence.pdf" in linked
+
+
+def test_rig_report_renders_elsewhere_stay_out_of_the_index(rig_run, tmp_path, monkeypatch):
+    from facebasis.report import run_report
+
+    def fake_shapes(rig, path, formats=("png",)):  # the renders themselves are tested above
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.with_suffix(".png").write_bytes(b"png")
+        return [path.with_suffix(".png")]
+
+    monkeypatch.setattr(run_report, "shapes_figure", fake_shapes)
+    run_report.report_run(rig_run, tmp_path / "report", formats=("png",), renders_dir=tmp_path / "renders")
+    assert (tmp_path / "renders" / "shapes.png").is_file()
+    index = (tmp_path / "report" / "index.md").read_text()
+    assert "shapes" not in index.split("## Figures")[1] and "convergence.png" in index
+
+
+def _rows(seeds=(0, 1)):
+    rows = []
+    base = {"problem": "default", "method": "example-based", "alpha0": None, "lam0": None, "noise": None,
+            "noise_seed": None, "train_error": None, "shape_error": 0.2, "rig_change": None, "seconds": 1.0}
+    for s in seeds:
+        for a in (0.01, 0.1, 1.0):
+            rows.append({**base, "study": "alpha", "seed": s, "alpha0": a, "heldout_error": 0.05 + a / 100 + s / 1000,
+                         "train_error": 0.02 + a / 50})
+            for v in (1.0, 100.0):
+                rows.append({**base, "study": "grid", "seed": s, "alpha0": a, "lam0": v, "heldout_error": 0.04 + a / 50})
+        for v in (0.1, 10.0, 1000.0):
+            rows.append({**base, "study": "lambda", "seed": s, "lam0": v, "heldout_error": 0.06, "train_error": 0.03})
+        for nz in (0.0, 0.5):
+            for ns in (0, 1):
+                rows.append({**base, "study": "noise", "seed": s, "noise": nz, "noise_seed": ns,
+                             "heldout_error": 0.05, "rig_change": nz / 50 + ns / 1000})
+        for m, e in (("deformation transfer", 0.07), ("example-based", 0.03 + s / 100)):
+            rows.append({**base, "study": "methods", "seed": s, "method": m, "heldout_error": e})
+    return rows
+
+
+def test_sweep_figures_and_methods_with_seeds(tmp_path, linted):
+    from facebasis.report.run_report import sweep_report
+
+    problems, titles = linted
+    paths = sweep_report(_rows(), tmp_path, formats=("png",))
+    assert {p.name for p in paths} >= {"alpha_sweep.png", "lambda_sweep.png", "alpha_lambda_heatmap.png",
+                                       "noise_robustness.png", "methods.png", "methods.md", "methods.csv"}
+    assert all(not v for v in problems.values()), problems
+    md = (tmp_path / "methods.md").read_text()
+    assert "held-out error (std over seeds)" in md and "| example-based | 0.035 | 0.005 |" in md
+    # one seed: the figure says n = 1
+    problems.clear()
+    sweep_report([r for r in _rows((0,)) if r["study"] == "methods"], tmp_path / "one", formats=("png",))
+    assert not problems["methods"]
+    text = (tmp_path / "one" / "methods.csv").read_text()
+    assert text.splitlines()[1].endswith(",1")
+
+
+def test_formulation_figure_is_clean(tmp_path, linted):
+    from facebasis.report.run_report import formulation_report
+    from facebasis.rigging.formulations import compare_formulations
+    from problems.weights_suite import closed_form_instances
+
+    problems, _ = linted
+    formulation_report(compare_formulations(closed_form_instances()), tmp_path, formats=("png",))
+    assert problems["formulations"] == []
+
+
+def test_penetration_closeups_count_per_zone_with_equal_panels(tmp_path, linted):
+    from facebasis.report.run_report import penetration_figure
+
+    from conftest import grid_sheet
+
+    _, titles = linted
+    V, F = grid_sheet(8, 6)
+    V = np.asarray(V, float)
+    F = np.asarray(F)
+    c = V[F].mean(1)
+    left, right = np.flatnonzero(c[:, 0] < 0.5), np.flatnonzero(c[:, 0] >= 0.5)
+    data = {"faces": F, "names": ["e"], "e/plain": V, "e/ve": V,
+            "e/plain_hits": np.r_[left[:3], right[:2]], "e/ve_hits": left[:1],
+            "crops": {"a": ("front", ((-0.1, 0.5), (-0.1, 1.1))), "b": ("front", ((0.5, 1.1), (0.2, 0.5)))},
+            "zone_faces": {"a": left, "b": right}}
+    penetration_figure(data, tmp_path)
+    shown = titles["penetration_closeups"]
+    assert shown == ["3 crossing", "1 crossing", "2 crossing", "0 crossing"]
+
+
+def test_reports_script_names_the_folder_it_wrote(tmp_path, monkeypatch):
+    from problems.reports import _shown
+
+    monkeypatch.chdir(tmp_path)
+    assert _shown(tmp_path / "x") == "x"
+    assert _shown(Path("/elsewhere/out")) == "/elsewhere/out"

@@ -16,15 +16,21 @@ import time
 import tracemalloc
 
 
+#: CPU seconds (all threads of this process) of each warm run of the last _timed call
+LAST_CPU: list = []
+
+
 def _timed(fn, repeat):
     t0 = time.perf_counter()
     out = fn()
     cold = time.perf_counter() - t0
     times = []
+    LAST_CPU.clear()
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         out = fn()
         times.append(time.perf_counter() - t0)
+        LAST_CPU.append(time.process_time() - c0)
     tracemalloc.start()
     fn()
     peak = tracemalloc.get_traced_memory()[1]
@@ -76,10 +82,15 @@ def bench_rig(repeat: int) -> dict:
     print(f"rig: ICT {p.template.n_vertices} vertices, {k} shapes, {len(p.examples)} training expressions, "
           f"{len(p.exclusive)} exclusive pairs, default schedule ({len(res.history)} iterations)")
     print(f"  wall (precompute + all iterations): median {statistics.median(times):.2f} s over {len(times)} warm "
-          f"runs; cold first run {cold:.2f} s  [target <= 3.0 s]; peak traced memory {peak / 2**20:.0f} MiB")
-    print(f"  precompute {res.precompute_seconds:.2f} s; per iteration: basis step + reconstruction "
-          f"{np.mean([h.basis_seconds for h in res.history]):.3f} s, weight step (IPOPT + polish) "
-          f"{np.mean([h.weight_seconds for h in res.history]):.3f} s")
+          f"runs (CPU median {statistics.median(LAST_CPU):.2f} s; load average {os.getloadavg()[0]:.2f}); cold "
+          f"first run {cold:.2f} s  [target <= 3.0 s]; peak traced memory {peak / 2**20:.0f} MiB")
+    basis = sum(h.basis_seconds for h in res.history)
+    weight = sum(h.weight_seconds for h in res.history)
+    total = res.precompute_seconds + res.seconds
+    print(f"  last warm run {times[-1]:.2f} s = precompute {res.precompute_seconds:.2f} + basis steps with "
+          f"reconstruction {basis:.2f} ({len(res.history)} x {basis / len(res.history):.3f}) + weight steps "
+          f"{weight:.2f} + other {total - res.precompute_seconds - basis - weight:.2f} (bookkeeping) + outside "
+          f"the generator {times[-1] - total:.2f}")
     print(f"  IPOPT statuses {sorted(set(h.ipopt_status for h in res.history))}, iterations "
           f"{[h.ipopt_iterations for h in res.history]}")
     print(f"  max complementarity {max(h.max_complementarity for h in res.history):.1e} (IPOPT raw "

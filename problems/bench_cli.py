@@ -50,6 +50,7 @@ def bench_cli(repeat: int, facex: str | None = None) -> dict:
     from facebasis.geometry.meshio import read_mesh, write_mesh
     from facebasis.geometry.rig import load_rig_folder, write_rig_folder
     from facebasis.geometry.transfer import deformation_transfer
+    from facebasis.rigging.runs import write_problem_inputs
     from problems.generation import ict_person_problem
 
     exe = [sys.executable, "-m", "facebasis.cli"]
@@ -61,14 +62,7 @@ def bench_cli(repeat: int, facex: str | None = None) -> dict:
         p = pp.problem
         write_rig_folder(root / "template", p.template)
         write_mesh(root / "target.obj", p.target_neutral, p.template.faces)
-        (root / "examples").mkdir()
-        for name, T in zip(p.example_names, p.examples):
-            write_mesh(root / "examples" / f"{name}.obj", T, p.template.faces)
-        import json
-
-        (root / "weights.json").write_text(json.dumps(
-            {n: {s: float(v) for s, v in zip(p.template.names, row) if v > 0}
-             for n, row in zip(p.example_names, p.initial_weights)}))
+        write_problem_inputs(root, p)  # examples/<name>.obj and weights.json, as `facebasis rig` takes them
 
         walls, cpus, _ = _run(exe[:1] + ["-c", "import facebasis.cli; facebasis.cli.build_parser()"], repeat)
         _line("import of the CLI + parser", walls, cpus, "0.5 s")

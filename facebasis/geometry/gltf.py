@@ -56,6 +56,13 @@ def glb_bytes(rig: Rig) -> bytes:
         "bufferViews": views,
         "accessors": accessors,
     }
+    return glb_container(doc, chunks)
+
+
+def glb_container(doc: dict, chunks) -> bytes:
+    """The GLB file of a glTF JSON document ``doc`` and its binary buffer, given as 4-byte aligned
+    ``chunks`` in buffer order: a 12-byte header, the JSON chunk padded with spaces and the BIN
+    chunk (glTF 2.0 specification, section "GLB File Format Specification")."""
     js = json.dumps(doc, separators=(",", ":")).encode()
     js += b" " * ((-len(js)) % 4)
     binary = b"".join(chunks)
@@ -71,4 +78,4 @@ def write_glb(rig: Rig, path) -> Path:
     return path
 
 
-__all__ = ["glb_bytes", "write_glb"]
+__all__ = ["glb_bytes", "glb_container", "write_glb"]

@@ -16,8 +16,6 @@ top-level entries.
 
 from __future__ import annotations
 
-import json
-import struct
 from pathlib import Path
 from typing import Sequence
 
@@ -25,6 +23,7 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
+from ..geometry.gltf import glb_container
 
 _FLOAT, _UINT = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -104,12 +103,7 @@ def animated_glb_bytes(neutral, faces, targets, names: Sequence[str], times, wei
         doc["animations"] = [{"name": animation_name,
                               "samplers": [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"}],
                               "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}]
-    js = json.dumps(doc, separators=(",", ":")).encode()
-    js += b" " * ((-len(js)) % 4)
-    binary = b"".join(chunks)
-    total = 12 + 8 + len(js) + 8 + len(binary)
-    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
-            + struct.pack("<I4s", len(binary), b"BIN\0") + binary)
+    return glb_container(doc, chunks)
 
 
 def frame_times(n_frames: int, fps: float) -> np.ndarray:

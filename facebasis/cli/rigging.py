@@ -14,16 +14,41 @@ def cmd_transfer(args) -> int:
     from ..geometry.rig import load_rig_folder, load_target_neutral, write_shapes
     from ..geometry.transfer import DeformationTransfer
 
+    from ..errors import InputError
+
+    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
+        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
+    if args.contact_exclude:
+        template.index(args.contact_exclude, what="--contact-exclude")
     ve = virtual_edges_for(args, template)
     t0 = time.perf_counter()
-    result = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,
-                                 virtual_mode=args.virtual_mode).transfer()
+    dt = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,
+                             virtual_mode=args.virtual_mode)
+    contact = None
+    if args.contact:
+        from ..contact.exact import contact_transfer
+
+        contact = contact_transfer(template, target, exclude=args.contact_exclude, transfer=dt,
+                                   allow_target_pairs=args.contact_allow_target_pairs)
+        result = contact.rig
+    else:
+        result = dt.transfer()
     seconds = time.perf_counter() - t0
     with atomic_directory(args.out) as stage:
         write_shapes(stage, result)
     print(f"transferred {result.n_shapes} shapes onto {args.target} in {seconds:.3f} s -> {args.out}")
+    if contact is not None:
+        print(contact.table())
+        if not contact.ok:
+            bad = [s.name for s in contact.shapes if not s.excluded and s.new_pairs_left]
+            print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
+                  f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
+            return 1
+        print("exact check: no transferred shape has a triangle pair intersecting that does not intersect in the "
+              "target neutral or in the template shape" + (f" (excluded: {', '.join(args.contact_exclude)})"
+                                                           if args.contact_exclude else ""))
     return 0
 
 
@@ -234,6 +259,16 @@ def register(sub) -> None:
     p.add_argument("--target", required=True, help="target neutral mesh (.obj/.ply), template topology")
     p.add_argument("--out", required=True, help="output folder: <shape>.obj for every template shape")
     add_virtual_edge_args(p)
+    p.add_argument("--contact", action="store_true",
+                   help="exact contact: the least-squares transfer subject to no triangle pair intersecting that "
+                        "does not intersect in the target neutral or in the template shape; checked exactly after "
+                        "every solve (exit status 1 if a shape keeps a new pair)")
+    p.add_argument("--contact-exclude", action="extend", nargs="+", default=[], metavar="SHAPE",
+                   help="with --contact: shapes left as plain transfer, e.g. correctives meant to press layers "
+                        "together (several after one flag or repeated)")
+    p.add_argument("--contact-allow-target-pairs", action="store_true",
+                   help="with --contact: accept a target neutral that intersects itself where the template does "
+                        "not (those pairs stay allowed); without it that is an error naming the pairs")
     p.set_defaults(func=cmd_transfer)
 
     p = sub.add_parser("rig", help="example-based blendshape generation (Gao et al. 2015)")

@@ -1,15 +1,18 @@
-"""Keeping thin facial layers apart: virtual edges and an exact intersection counter.
+"""Keeping thin facial layers apart: virtual edges, an exact intersection counter, exact contact.
 
 Virtual edges join vertices that are close in space but far along the surface (lips, lids) and
 are kept, softly, transformed like real edges during deformation transfer and generation. The
 counter finds every intersecting triangle pair exactly (Shewchuk-style exact predicates) and
-splits new pairs into local folds and layer crossings.
+splits new pairs into local folds and layer crossings. Exact contact (``contact_transfer``) corrects
+transferred shapes so that no new pair intersects at all, moving only vertices near the contacts.
 
 Modules
 -------
 geodesics      bounded graph geodesics (Dijkstra on an unfolded edge graph), on all cores
 virtual_edges  detection, thinning, targets and the energy's operator
 penetration    exact triangle-pair intersection, new-pair reports, local folds vs layer crossings
+proximity      fast conservative pair search (k-d trees of bounding balls), triangle-triangle distances
+exact          exact contact for deformation transfer: separating-plane QP iterated with the exact counter
 
 References
 ----------

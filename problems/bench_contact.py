@@ -1,0 +1,117 @@
+"""Exact contact benchmark: ``python -m problems.bench_contact [--no-crosscheck] [--exclude NAME ...]``.
+
+ICT's 53 expressions transferred onto identity seed 0 scaled 3x (as ``bench virtual``) with
+:func:`facebasis.contact.exact.contact_transfer`. New pairs = intersecting pairs not in the target
+neutral nor in the template shape (same triangles), split into layer crossings and local folds
+(triangles within ``LOCAL_FOLD_EDGES`` median edges along the target neutral), counted by the
+package's own counter :func:`facebasis.contact.penetration.penetration_report` (the cross-check, not
+timed). Change away from the lips and lids relative to the motion: as ``bench_virtual``,
+``||d - d_plain|| / ||d_plain||`` over every shape and every vertex outside both zones.
+
+Writes ``reports/contact/contact.md`` and ``reports/contact/contact.csv``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPORTS = Path(__file__).resolve().parent.parent / "reports" / "contact"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m problems.bench_contact")
+    parser.add_argument("--no-crosscheck", action="store_true", help="skip the full counter cross-check")
+    parser.add_argument("--exclude", nargs="*", default=[], metavar="NAME")
+    parser.add_argument("--no-write", action="store_true", help="print only, do not write reports/contact")
+    args = parser.parse_args(argv)
+
+    from facebasis.contact.exact import contact_transfer
+    from facebasis.contact.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
+    from facebasis.geometry.mesh import median_edge_length
+    from problems.bench import _machine
+    from problems.ict import ict_available, ict_identity, ict_path, ict_random_identity, ict_rig, ict_zones
+
+    if not ict_available():
+        print(f"ICT data not found at {ict_path()}", file=sys.stderr)
+        return 2
+    print(f"machine: {_machine()}")
+    rig = ict_rig()
+    F = rig.faces
+    c, _ = ict_random_identity(0)
+    B0 = ict_identity(3.0 * c)
+    t0 = time.perf_counter()
+    res = contact_transfer(rig, B0, exclude=args.exclude, allow_target_pairs=True)
+    wall = time.perf_counter() - t0
+    print(f"contact transfer: ICT {rig.n_vertices} vertices, {len(F)} triangles, {rig.n_shapes} expressions onto "
+          f"identity seed 0 scaled 3x: {wall:.2f} s wall  [target <= 30 s]")
+    print("  where the time goes: " + ", ".join(f"{k} {v:.2f} s" for k, v in res.seconds.items()))
+    shapes = [s for s in res.shapes if not s.excluded]
+    print(f"  per shape (s): plain check + solves + exact checks, sum {sum(s.seconds for s in shapes):.2f}, "
+          f"max {max(s.seconds for s in shapes):.2f} ({max(shapes, key=lambda s: s.seconds).name})")
+    print(res.table())
+
+    zones = ict_zones()
+    layered = zones["lips"] | zones["lids"]
+    outside = ~layered
+    plain, out = res.plain.deltas, res.rig.deltas
+    diff = np.linalg.norm(out - plain, axis=2)
+    motion = np.linalg.norm(plain, axis=2)
+    rel_out = float(np.linalg.norm(diff[:, outside]) / np.linalg.norm(motion[:, outside]))
+    rel_all = float(np.linalg.norm(diff) / np.linalg.norm(motion))
+    print(f"  change away from the lips and lids relative to the motion: {rel_out:.4f}  [target <= 0.05]; max "
+          f"{diff[:, outside].max():.4f} cm there; everywhere {rel_all:.4f}")
+    rows = []
+    totals = np.zeros(6, np.int64)
+    if not args.no_crosscheck:
+        t = time.perf_counter()
+        neutral_pairs = pair_set(B0, F)
+        lips_lids = {"lips": zones["lips"], "lids": zones["lids"]}
+        local_within = LOCAL_FOLD_EDGES * median_edge_length(B0, F)
+        for k, s in enumerate(res.shapes):
+            i = rig.names.index(s.name)
+            tp = pair_set(rig.neutral + rig.deltas[i], F)
+            counts = []
+            for D in (plain[k], out[k]):
+                rep = penetration_report(B0 + D, F, zones=lips_lids, reference_pairs=(neutral_pairs, tp), rest=B0,
+                                         local_within=local_within)
+                counts.append((rep.count(), rep.count(local=False), rep.count("lids")))
+            rows.append((s, counts, float(np.linalg.norm(diff[k, outside]) / max(np.linalg.norm(motion[k, outside]), 1e-300))))
+            totals += np.array(counts[0] + counts[1])
+        print(f"  cross-check with penetration_report (full exact counter, {time.perf_counter() - t:.1f} s, not timed): "
+              f"plain {totals[0]} new pairs ({totals[1]} layer crossings, {totals[0] - totals[1]} local folds, lids "
+              f"{totals[2]}) -> contact {totals[3]} new pairs ({totals[4]} layer crossings, {totals[3] - totals[4]} local "
+              f"folds, lids {totals[5]})  [target 0, 0 at the lids]")
+        agree = all(r[1][1][0] == r[0].new_pairs_left for r in rows if not r[0].excluded)
+        print(f"  solver's own count agrees with penetration_report on every shape: {agree}")
+    if args.no_write or args.no_crosscheck:
+        return 0
+    REPORTS.mkdir(parents=True, exist_ok=True)
+    header = ["expression", "excluded", "plain_new_pairs", "plain_layer_crossings", "plain_lids", "contact_new_pairs",
+              "contact_layer_crossings", "contact_lids", "constrained_pairs", "rows", "iterations", "qp_iterations",
+              "moved_vertices", "min_distance_cm", "relative_change_outside_lips_lids", "seconds"]
+    table = []
+    for s, counts, rel in rows:
+        table.append([s.name, int(s.excluded), *counts[0], *counts[1], s.constrained_pairs, s.rows, s.iterations,
+                      s.solver_iterations, s.moved, "" if np.isnan(s.min_distance) else f"{s.min_distance:.5f}",
+                      f"{rel:.4f}", f"{s.seconds:.3f}"])
+    with open(REPORTS / "contact.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(table)
+    md = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    md += ["| " + " | ".join(str(v) for v in r) + " |" for r in table]
+    md.append("| total | | " + " | ".join(str(v) for v in totals.tolist()) + " | | | | | | | "
+              f"{rel_out:.4f} | {wall:.2f} |")
+    (REPORTS / "contact.md").write_text("\n".join(md) + "\n")
+    print(f"  wrote {REPORTS / 'contact.md'} and contact.csv")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

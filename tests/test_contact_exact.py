@@ -1,0 +1,187 @@
+"""Exact contact for deformation transfer: separating planes iterated with the exact counter."""
+
+import numpy as np
+import pytest
+
+from conftest import grid_sheet
+from facebasis.contact.exact import contact_transfer
+from facebasis.contact.penetration import intersecting_pairs, penetration_report, triangle_pairs_intersect
+from facebasis.contact.proximity import candidate_pairs, new_pairs, triangle_distance
+from facebasis.errors import InputError
+from facebasis.geometry.rig import Rig
+from facebasis.geometry.transfer import DeformationTransfer
+from test_virtual_edges import press_rig
+
+
+def two_sheets(gap=0.6, push=0.5, bottom_len=1.5):
+    """A long top sheet (x in [0, 4]) above a short bottom sheet (x in [0, bottom_len]) at distance
+    ``gap``; the template shape pushes the top sheet down by ``push`` (still along its long borders,
+    which anchor it). Returns the template rig."""
+    Vt, Ft = grid_sheet(21, 7, z=gap, size=4.0)
+    Vb, Fb = grid_sheet(9, 7, z=0.0, size=bottom_len)
+    Vb[:, 1] *= 4.0 / bottom_len  # same width as the top sheet
+    Vb[:, :2] += (0.05, 0.0)
+    Vt[:, 2] += 0.01 * np.sin(3.0 * Vt[:, 0] + 1.0) * np.cos(2.0 * Vt[:, 1])  # not coplanar: fast exact tests
+    Vb[:, 2] += 0.01 * np.cos(2.0 * Vb[:, 0]) * np.sin(3.0 * Vb[:, 1] + 0.5)
+    V = np.concatenate([Vt, Vb])
+    F = np.concatenate([Ft, Fb + len(Vt)])
+    d = np.zeros_like(V)
+    y = Vt[:, 1] / Vt[:, 1].max()
+    d[: len(Vt), 2] = -push * np.sin(np.pi * y) ** 2
+    return Rig(V, F, ("push", "still"), np.stack([d, np.zeros_like(d)]))
+
+
+def stretched(V, sx=1.1, gap=0.3):
+    """The target neutral: stretched along x, the top sheet lowered to ``gap`` above the bottom one."""
+    W = V.copy()
+    W[:, 0] *= sx
+    W[W[:, 2] > 0.1, 2] += gap - 0.6
+    return W
+
+
+def new_count(rig, target, deltas, names):
+    out = []
+    for D, name in zip(deltas, names):
+        i = rig.names.index(name)
+        rep = penetration_report(target + D, rig.faces, references=(target, rig.neutral + rig.deltas[i]))
+        out.append(len(rep.new))
+    return out
+
+
+def test_two_sheets_pushed_through_stay_apart_and_keep_their_motion_elsewhere():
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    plain = DeformationTransfer(rig, target).transfer()
+    assert new_count(rig, target, plain.deltas, plain.names)[0] > 0  # plain transfer pushes through
+    res = contact_transfer(rig, target, reach=0.5)
+    assert res.ok and new_count(rig, target, res.rig.deltas, res.rig.names) == [0, 0]
+    rep = res.shapes[0]
+    assert rep.plain_new_pairs > 0 and rep.new_pairs_left == 0 and rep.iterations >= 1
+    assert rep.min_distance > 0 and rep.constrained_pairs > 0
+    # beyond reach of the bottom sheet (x <= 1.72 of the stretched 4.4) the plain motion is kept exactly
+    far = np.flatnonzero(target[:, 0] > 2.6)
+    assert len(far) > 40
+    assert np.array_equal(res.rig.deltas[0][far], plain.deltas[0][far])
+    # and the shape still moves: the top sheet comes down to the bottom sheet, it is not left at rest
+    top = np.arange(21 * 7)
+    assert res.rig.deltas[0][top, 2].min() < -0.2
+    assert np.array_equal(res.rig.deltas[1], plain.deltas[1])  # a still shape is untouched
+
+
+def test_a_folded_strip_pressed_through_itself_stays_apart():
+    rig, target, layer = press_rig(gap=0.4)  # template gap 1.0 pressed by 0.8: the target's 0.4 is crossed
+    bump = lambda V: V + np.c_[0 * V[:, :2], 0.004 * np.sin(2.1 * V[:, 0] + 0.3) * np.cos(1.7 * V[:, 1])]
+    rig = Rig(bump(rig.neutral), rig.faces, rig.names, rig.deltas)  # not coplanar: fast exact tests
+    target = bump(target)
+    plain = DeformationTransfer(rig, target).transfer()
+    assert new_count(rig, target, plain.deltas, plain.names)[0] > 0
+    res = contact_transfer(rig, target)
+    assert res.ok and new_count(rig, target, res.rig.deltas, res.rig.names) == [0]
+    assert res.shapes[0].min_distance > 0
+    # the press still closes most of the gap
+    top = layer == 2
+    gap = (target + res.rig.deltas[0])[top, 2].min()
+    assert gap < 0.25
+
+
+def test_template_pairs_stay_allowed_and_excluded_shapes_are_plain():
+    rig = two_sheets(gap=0.3, push=0.6)  # the template itself pushes through: those pairs are meant
+    assert len(intersecting_pairs(rig.neutral + rig.deltas[0], rig.faces)) > 0
+    res = contact_transfer(rig, rig.neutral)  # onto itself: the plain result is the template shape
+    assert res.ok and res.shapes[0].constrained_pairs == 0
+    assert np.allclose(res.rig.deltas, rig.deltas, atol=1e-9)
+    target = stretched(rig.neutral)
+    target = stretched(rig.neutral, gap=0.6)  # the top sheet stays 0.3 above the bottom one
+    ex = contact_transfer(rig, target, exclude=["push"])
+    plain = DeformationTransfer(rig, target).transfer()
+    assert ex.shapes[0].excluded and np.array_equal(ex.rig.deltas[0], plain.deltas[0])
+    assert "excluded" in ex.table()
+
+
+def test_pairs_intersecting_in_the_target_neutral_stay_allowed():
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    # dip one corner of the top sheet through the bottom sheet in the target neutral
+    corner = np.flatnonzero((target[:, 0] < 0.5) & (target[:, 1] > 1.0) & (target[:, 1] < 2.2) & (target[:, 2] > 0.1))
+    target[corner, 2] = -0.2
+    at_rest = intersecting_pairs(target, rig.faces)
+    assert len(at_rest) > 0
+    with pytest.raises(InputError, match=r"target neutral: expected no intersecting triangle pairs beyond the "
+                                         r"template neutral's, found \d+ \(triangles \(\d+, \d+\)"):
+        contact_transfer(rig, target)
+    res = contact_transfer(rig, target, allow_target_pairs=True)
+    assert res.ok and new_count(rig, target, res.rig.deltas, res.rig.names) == [0, 0]
+
+
+def test_errors():
+    rig = two_sheets()
+    with pytest.raises(InputError, match=r"contact exclude: expected shape names of the template .*found unknown 'nope'"):
+        contact_transfer(rig, rig.neutral, exclude=["nope"])
+    with pytest.raises(InputError, match=r"contact: expected a mesh of at most 100 vertices .* found 210"):
+        contact_transfer(rig, rig.neutral, max_vertices=100)
+    with pytest.raises(InputError, match=r"contact margin: expected a positive distance, found -1"):
+        contact_transfer(rig, rig.neutral, margin=-1.0)
+
+
+def test_fast_search_matches_the_exact_counter():
+    rng = np.random.default_rng(3)
+    rig = two_sheets(gap=0.3, push=0.7)
+    V = rig.neutral + rig.deltas[0] + 0.02 * rng.standard_normal(rig.neutral.shape)
+    assert np.array_equal(new_pairs(V, rig.faces), intersecting_pairs(V, rig.faces))
+    sel = np.zeros(len(rig.faces), bool)
+    sel[rng.choice(len(rig.faces), 40, replace=False)] = True
+    full = intersecting_pairs(V, rig.faces)
+    assert np.array_equal(new_pairs(V, rig.faces, faces=sel), full[sel[full].any(1)])
+    assert len(candidate_pairs(V, rig.faces, faces=sel)) <= len(candidate_pairs(V, rig.faces))
+
+
+def test_triangle_distance_and_separating_direction():
+    rng = np.random.default_rng(0)
+    T1 = rng.normal(size=(200, 3, 3))
+    T2 = rng.normal(size=(200, 3, 3)) + 3 * rng.normal(size=(200, 1, 3))
+    disjoint = ~triangle_pairs_intersect(T1, T2)
+    d, n = triangle_distance(T1[disjoint], T2[disjoint])
+    # the plane normal to n separates the triangles with margin exactly d
+    gap = np.einsum("pkx,px->pk", T1[disjoint], n).min(1) - np.einsum("pkx,px->pk", T2[disjoint], n).max(1)
+    assert np.allclose(gap, d, atol=1e-12)
+    # no sampled pair of points is closer than d
+    u = rng.random((400, 2))
+    w = np.c_[1 - u.sum(1), u][u.sum(1) <= 1]
+    P1 = np.einsum("sk,pkx->psx", w, T1[disjoint])
+    P2 = np.einsum("sk,pkx->psx", w, T2[disjoint])
+    sampled = np.sqrt(((P1[:, :, None] - P2[:, None]) ** 2).sum(-1)).min(axis=(1, 2))
+    assert np.all(sampled >= d - 1e-12)
+
+
+def test_cli_transfer_with_contact(tmp_path, capsys):
+    """`facebasis transfer --contact`: the pushed sheet stays apart (checked with the package's exact
+    counter on the written files), an excluded shape (repeated flag) is written as plain transfer,
+    and the command says what the exact check found."""
+    from facebasis.cli import main
+    from facebasis.contact.penetration import penetration_report
+    from facebasis.geometry.meshio import read_mesh, write_mesh
+    from facebasis.geometry.rig import write_rig_folder
+
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    write_rig_folder(tmp_path / "template", rig)
+    write_mesh(tmp_path / "target.obj", target, rig.faces)
+    base = ["transfer", "--template", str(tmp_path / "template"), "--target", str(tmp_path / "target.obj")]
+    assert main(base + ["--out", str(tmp_path / "plain")]) == 0
+    assert main(base + ["--out", str(tmp_path / "contact"), "--contact"]) == 0
+    out = capsys.readouterr().out
+    assert "exact check: no transferred shape has a triangle pair intersecting" in out
+    V_plain, F = read_mesh(tmp_path / "plain" / "push.obj")
+    V_contact, _ = read_mesh(tmp_path / "contact" / "push.obj")
+    refs = [target, rig.neutral + rig.deltas[0]]
+    assert len(penetration_report(V_plain, F, refs).new) > 0
+    assert len(penetration_report(V_contact, F, refs).new) == 0
+    assert main(base + ["--out", str(tmp_path / "excluded"), "--contact", "--contact-exclude", "push",
+                        "--contact-exclude", "still"]) == 0
+    assert np.allclose(read_mesh(tmp_path / "excluded" / "push.obj")[0], V_plain, atol=1e-9)
+    capsys.readouterr()
+    assert main(base + ["--out", str(tmp_path / "x"), "--contact-exclude", "push"]) == 2
+    assert "expected --contact as well" in capsys.readouterr().err
+    assert main(base + ["--out", str(tmp_path / "x"), "--contact", "--contact-exclude", "pull"]) == 2
+    assert "--contact-exclude: unknown blendshape names ['pull']" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()

@@ -132,3 +132,11 @@ def test_what_trimesh_rejects_is_rejected_with_the_same_messages(tmp_path):
 def test_writer_rejects_negative_indices():
     with pytest.raises(MeshError, match="expected face indices >= 0, found -1"):
         obj_bytes(np.zeros((3, 3)), np.array([[0, 1, -1]]))
+
+
+def test_face_lines_are_cached_per_topology_never_reused_for_another():
+    V = np.random.default_rng(0).normal(size=(6, 3))
+    F1 = np.array([[0, 1, 2], [3, 4, 5]])
+    F2 = np.array([[0, 1, 2], [3, 5, 4]])  # same shape, other faces
+    for F in (F1, F2, F1, F2):
+        assert obj_bytes(V, F) == _trimesh_bytes(V, F)

@@ -269,8 +269,25 @@ def obj_bytes(V: np.ndarray, F: np.ndarray) -> bytes:
     if len(F) and F.min() < 0:
         raise MeshError(f"OBJ output: expected face indices >= 0, found {int(F.min())}")
     verts = ("v %.10f %.10f %.10f\n" * len(V)) % tuple(V.ravel().tolist())
-    faces = ("f %d %d %d\n" * len(F)) % tuple((F + 1).ravel().tolist())
-    return (verts + faces + "\n").encode()
+    return verts.encode() + _face_block(F)
+
+
+#: the ``f`` lines of the last few topologies written (a rig's shapes all share one)
+_FACE_BLOCKS: dict = {}
+
+
+def _face_block(F: np.ndarray) -> bytes:
+    """``b"f a b c\\n" ... b"\\n"`` of ``F`` (m, 3), formatted once per distinct face array."""
+    import hashlib
+
+    key = (F.shape, hashlib.blake2b(np.ascontiguousarray(F).tobytes(), digest_size=16).digest())
+    block = _FACE_BLOCKS.get(key)
+    if block is None:
+        block = (("f %d %d %d\n" * len(F)) % tuple((F + 1).ravel().tolist()) + "\n").encode()
+        if len(_FACE_BLOCKS) >= 4:
+            _FACE_BLOCKS.pop(next(iter(_FACE_BLOCKS)))
+        _FACE_BLOCKS[key] = block
+    return block
 
 
 __all__ = ["read_obj", "obj_bytes"]

@@ -204,3 +204,11 @@ def test_penetration_keeps_every_reference(tmp_path, capsys):
     assert main(["penetration", str(tmp_path / "m.obj"), "--reference", str(tmp_path / "r1.obj"),
                  "--reference", str(tmp_path / "r2.obj")]) == 0
     assert "new relative to 2 reference(s): 0" in capsys.readouterr().out
+
+
+def test_help_is_plain_words():
+    """No reST/Markdown markup, no internal paper codes, every option's default a value."""
+    for name, sub in _subparsers(build_parser()):
+        text = sub.format_help()
+        assert "`" not in text and "seed 00" not in text and "DEFAULT_" not in text, name
+        assert sub.description, name

@@ -46,8 +46,8 @@ def cmd_sweep(args) -> int:
 
 def register(sub) -> None:
     """Add this group's subcommands to the ``facebasis`` parser."""
-    p = sub.add_parser("report", help="figures of a `facebasis rig` folder or of a `facebasis sweep` table")
-    p.add_argument("path", help="rig output folder, or results .csv of `facebasis sweep`")
+    p = sub.add_parser("report", help="figures and tables of a facebasis rig output folder or of a facebasis sweep table")
+    p.add_argument("path", help="rig output folder, or the results .csv of facebasis sweep")
     p.add_argument("--out", default=None, help="output folder (default: RUN_DIR/report, or the CSV's name)")
     p.add_argument("--formats", default="png,pdf", help="figure formats (default png,pdf)")
     p.set_defaults(func=cmd_report)

@@ -311,14 +311,14 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd_rig_defaults(cmd_rig, defaults))
 
     p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
-    p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a `facebasis rig` output")
+    p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a facebasis rig output")
     p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder (default neutral.obj)")
     p.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="ignore matching files")
     p.add_argument("--out", required=True, help="output .glb")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("verify", help="certify the stored weights of a `facebasis rig` output folder")
-    p.add_argument("run_dir", help="output folder of `facebasis rig` (with inputs.json)")
+    p = sub.add_parser("verify", help="certify the stored weights of a facebasis rig output folder")
+    p.add_argument("run_dir", help="output folder of facebasis rig (with inputs.json)")
     p.add_argument("--tolerance", type=float, default=1e-6,
                    help="largest relative objective gap accepted (default 1e-6); exit status 1 beyond it")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",

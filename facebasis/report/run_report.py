@@ -17,8 +17,6 @@ atomically.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 from pathlib import Path
 
@@ -28,6 +26,7 @@ from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from .figures import _pyplot, convergence_figure, save
 from .render import HIGHLIGHT2_RGB, HIGHLIGHT_RGB, draw_mesh
+from .tables import csv_table, markdown_table, write_table  # noqa: F401  (re-exported)
 
 FORMATS = ("png", "pdf")
 
@@ -35,28 +34,6 @@ FORMATS = ("png", "pdf")
 def _write_text(path: Path, text: str) -> Path:
     atomic_write_bytes(path, text.encode())
     return path
-
-
-def markdown_table(header, rows, floatfmt="{:.4g}") -> str:
-    def cell(v):
-        return floatfmt.format(v) if isinstance(v, float) else str(v)
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    lines += ["| " + " | ".join(cell(v) for v in r) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
-
-
-def csv_table(header, rows) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    w.writerows(rows)
-    return buf.getvalue()
-
-
-def write_table(out: Path, name: str, header, rows, floatfmt="{:.4g}") -> list[Path]:
-    """``name.csv`` and ``name.md`` in ``out``."""
-    return [_write_text(out / f"{name}.csv", csv_table(header, rows)),
-            _write_text(out / f"{name}.md", markdown_table(header, rows, floatfmt))]
 
 
 # ----------------------------------------------------------------------------------------------

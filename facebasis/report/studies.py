@@ -209,12 +209,10 @@ def run_tasks(tasks, scheduler: str | None = None, workers: int | None = None, p
 
 
 def table_csv(rows) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({c: r.get(c, "") for c in COLUMNS})
-    return buf.getvalue()
+    """The results table (dict rows) as CSV text in :data:`COLUMNS` order."""
+    from .tables import csv_table, dict_rows
+
+    return csv_table(COLUMNS, dict_rows(rows, COLUMNS))
 
 
 def write_table(rows, path) -> None:

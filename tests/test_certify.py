@@ -166,3 +166,17 @@ def test_tree_size_limit_raises_instead_of_answering_uncertified():
     G, c, const, _, _ = _random_instance(rng, k, pairs, 0.0)
     with pytest.raises(SolverError, match="exceeded 1 nodes"):
         certified_weights(G, c, const, pairs, np.full(k, 0.9), 100.0, max_nodes=1)
+
+
+def test_one_definition_of_the_residuals_serves_single_examples_and_batches():
+    from facebasis.rigging.certify import WeightInstance, bound_violation, complementarity_violation
+
+    P = np.array([[0, 1], [2, 3]])
+    X = np.array([[0.5, 0.2, 0.0, 1.0], [0.0, 0.9, 1.2, 0.3]])
+    assert complementarity_violation(X, P) == pytest.approx(0.36)          # 1.2 * 0.3
+    assert complementarity_violation(X[0], P) == pytest.approx(0.1)        # 0.5 * 0.2
+    assert complementarity_violation(X, np.zeros((0, 2), int)) == 0.0
+    assert bound_violation(X) == pytest.approx(0.2) and bound_violation(X[0]) == 0.0
+    inst = WeightInstance("t", "test", np.eye(4), np.ones(4), 4.0, np.zeros(4), 0.0, P)
+    assert inst.complementarity(X[1]) == pytest.approx(0.36) and inst.bound_violation(X[1]) == pytest.approx(0.2)
+    assert inst.objective(np.ones(4)) == pytest.approx(4 - 8 + 4)

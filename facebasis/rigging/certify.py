@@ -191,9 +191,21 @@ def _check_example(k, c, prior):
     return c, prior
 
 
+def complementarity_violation(X, pairs) -> float:
+    """``max |x_a x_b|`` over the exclusive pairs (p, 2) and every row of ``X`` ((k,) or (m, k))."""
+    P = np.asarray(pairs, np.int64).reshape(-1, 2)
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    return float(np.max(np.abs(X[:, P[:, 0]] * X[:, P[:, 1]]))) if len(P) and X.size else 0.0
+
+
+def bound_violation(X) -> float:
+    """Largest violation of ``0 <= x <= 1`` over ``X`` ((k,) or (m, k))."""
+    X = np.asarray(X, np.float64)
+    return float(max(0.0, -X.min(), X.max() - 1.0)) if X.size else 0.0
+
+
 def _violations(x, P):
-    comp = float(np.max(np.abs(x[P[:, 0]] * x[P[:, 1]]))) if len(P) else 0.0
-    return comp, float(max(0.0, -x.min(), x.max() - 1.0)) if len(x) else 0.0
+    return complementarity_violation(x, P), bound_violation(x)
 
 
 class _Workspace:
@@ -429,7 +441,7 @@ def weight_objective(x, G, c, const, prior=None, lam: float = 0.0) -> float:
 
 __all__ = ["BoxQPSolution", "CertifiedSolution", "CertifiedWeightSolver", "box_qp_kkt", "solve_box_qp",
            "certified_weights",
-           "brute_force_weights", "weight_objective"]
+           "brute_force_weights", "weight_objective", "complementarity_violation", "bound_violation"]
 
 
 @dataclass(frozen=True)
@@ -453,6 +465,14 @@ class WeightInstance:
 
     def objective(self, x) -> float:
         return weight_objective(x, self.G, self.c, self.const, self.prior, self.lam)
+
+    def complementarity(self, x) -> float:
+        """``max |x_a x_b|`` over this problem's pairs."""
+        return complementarity_violation(x, self.pairs)
+
+    def bound_violation(self, x) -> float:
+        """Largest violation of ``0 <= x <= 1``."""
+        return bound_violation(x)
 
     def certify(self, start=None, **kw) -> CertifiedSolution:
         return certified_weights(self.G, self.c, self.const, self.pairs, self.prior, self.lam, start=start, **kw)

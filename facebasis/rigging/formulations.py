@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .certify import bound_violation, complementarity_violation, weight_objective
 from .weights import IPOPT_OK
 
 FORMULATIONS = ("equality", "inequality", "scholtes", "penalty")
@@ -121,12 +122,11 @@ class FormulationSolver:
         else:
             for rho in PENALTY_RHO:
                 run(rho, 0.0)
-                if np.max(np.abs(x[P[:, 0]] * x[P[:, 1]])) <= 1e-9:
+                if complementarity_violation(x, P) <= 1e-9:
                     break
         G = np.asarray(G, float)
-        obj = float(x @ G @ x - 2 * np.asarray(c, float) @ x + const + lam * np.sum((x - prior) ** 2))
-        comp = float(np.max(np.abs(x[P[:, 0]] * x[P[:, 1]]))) if len(P) else 0.0
-        bnd = float(max(0.0, -x.min(), x.max() - 1.0))
+        obj = weight_objective(x, G, np.asarray(c, float), const, prior, lam)
+        comp, bnd = complementarity_violation(x, P), bound_violation(x)
         return FormulationResult(self.formulation, x, obj, tuple(statuses), iters, comp, bnd, time.perf_counter() - t0)
 
 

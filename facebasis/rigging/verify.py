@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .certify import CertifiedWeightSolver, weight_objective
+from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation, weight_objective
 from ..errors import InputError
 
 INPUTS_FILE = "inputs.json"
@@ -196,8 +196,8 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
         cs = certifier.solve(C[idx, j], const + held_prior, prior[j, idx], start=stored[j, idx])
         x = stored[j]
         f = weight_objective(x, G, C[:, j], const, prior[j], lam)
-        comp = float(np.max(np.abs(x[pairs[:, 0]] * x[pairs[:, 1]]))) if len(pairs) else 0.0
-        bound = float(max(0.0, -x.min(), x.max() - 1.0))
+        comp = complementarity_violation(x, pairs)
+        bound = bound_violation(x)
         gap = (f - cs.objective) / max(1.0, abs(cs.objective))
         ok = gap <= tolerance and comp <= residual_tolerance and bound <= residual_tolerance
         out.append(ExampleVerdict(name, f, cs.objective, gap, comp, bound, cs.nodes, ok))

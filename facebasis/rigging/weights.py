@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .certify import CertifiedWeightSolver
+from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation  # noqa: F401 (re-exported)
 from ..errors import InputError, SolverError
 from ..interrupt import interruptible
 
@@ -88,15 +88,6 @@ def eq5_objective(X, G, C, const, X_prior, lam) -> float:
     return float(data + lam * np.sum((X - X_prior) ** 2))
 
 
-def complementarity_violation(X, pairs) -> float:
-    if len(pairs) == 0:
-        return 0.0
-    P = np.asarray(pairs)
-    return float(np.max(np.abs(X[:, P[:, 0]] * X[:, P[:, 1]])))
-
-
-def bound_violation(X) -> float:
-    return float(max(0.0, -np.min(X), np.max(X) - 1.0))
 
 
 class WeightSolver:

@@ -33,13 +33,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ..errors import InputError
-from .weights import solve_certified
+from .weights import gram_data, solve_certified
 
-#: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect)
-DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
+#: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect).
+#: Down to 1e-4: on the ICT person problem (seed 0, 20 examples) a grid from 0.003 chose its lower
+#: edge; from 1e-4 the choice is 3e-4 (an interior minimum) and the held-out error drops 0.090 -> 0.073
+DEFAULT_GRID = (1e-4, 3e-4, 0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
 
 #: ratio first/last alpha of a candidate schedule (the paper's 0.5 -> 0.1)
 SCHEDULE_RATIO = 5.0
@@ -83,12 +84,8 @@ def heldout_error_parts(rig, expressions, pairs=()) -> tuple[float, float]:
     """(``||B_0 + B x - T||^2``, ``||T - B_0||^2``) summed over expressions (h, n, 3), with weights
     refitted by the certified solver (bounds + complementarity, no prior): the terms of
     :func:`~facebasis.rigging.generation.reproduction_error`."""
-    T = (np.asarray(expressions, np.float64) - rig.neutral).reshape(len(expressions), -1)
-    B = rig.deltas.reshape(rig.n_shapes, -1)
-    with threadpool_limits(1):
-        G, C = B @ B.T, B @ T.T
-    const = np.einsum("ij,ij->i", T, T)
-    sol = solve_certified(G, C, const, np.zeros((len(T), rig.n_shapes)), 0.0, pairs)
+    G, C, const = gram_data(rig, expressions)
+    sol = solve_certified(G, C, const, np.zeros((len(const), rig.n_shapes)), 0.0, pairs)
     return max(float(sol.objective), 0.0), float(const.sum())
 
 

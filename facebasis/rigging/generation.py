@@ -50,7 +50,7 @@ from ..errors import InputError
 from ..geometry.gradients import frames_cm
 from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
-from .weights import WeightSolver, WeightSolution, eq5_objective, solve_certified
+from .weights import WeightSolver, WeightSolution, eq5_objective, gram_data, solve_certified
 
 
 from .basis import (  # noqa: F401  (re-exported: the generation API in one place)
@@ -90,7 +90,7 @@ class BlendshapeGenerator:
         # virtual-edge targets (Li et al. 2023) of every shape, from the template as in deformation transfer:
         # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
         vc = self.dt.virtual_edge_cols(frame_deltas=dA)
-        self.virtual_rows = None if vc is None else np.ascontiguousarray(
+        self.extra_targets = None if vc is None else np.ascontiguousarray(
             vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         del dA
         B0 = problem.target_neutral
@@ -116,7 +116,7 @@ class BlendshapeGenerator:
         """Vertex deltas from the basis step's frame rows (2, m_tri, 3, k): returns (n, 3k) with
         column ``d k + i`` = coordinate d of shape i."""
         two, m_tri, three, k = rows.shape
-        return self.dt.poisson.solve_frame_rows(rows.reshape(2 * m_tri, 3 * k), self.anchor_rows, self.virtual_rows)
+        return self.dt.poisson.solve_frame_rows(rows.reshape(2 * m_tri, 3 * k), self.anchor_rows, self.extra_targets)
 
     @staticmethod
     def deltas_of(Bv) -> np.ndarray:
@@ -309,11 +309,10 @@ def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions 
 def refit_weights(rig: Rig, expressions: np.ndarray, pairs=(), lam: float = 0.0, prior=None,
                   solver: WeightSolver | None = None) -> WeightSolution:
     """Fit weights of given expressions (m, n, 3) to a rig (eq. 5 with an optional prior)."""
-    T = (np.asarray(expressions, float) - rig.neutral).reshape(len(expressions), -1)
-    B = rig.deltas.reshape(rig.n_shapes, -1)
-    prior = np.zeros((len(T), rig.n_shapes)) if prior is None else prior
-    solver = solver or WeightSolver(rig.n_shapes, len(T), pairs)
-    return solver.solve(B @ B.T, B @ T.T, (T ** 2).sum(1), prior, lam)
+    G, C, const = gram_data(rig, expressions)
+    prior = np.zeros((len(const), rig.n_shapes)) if prior is None else prior
+    solver = solver or WeightSolver(rig.n_shapes, len(const), pairs)
+    return solver.solve(G, C, const, prior, lam)
 
 
 def reproduction_error(rig: Rig, expressions: np.ndarray, pairs=(), solver: WeightSolver | None = None) -> float:

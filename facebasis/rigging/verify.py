@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation, weight_objective
+from .weights import gram_data
 from ..errors import InputError
 
 INPUTS_FILE = "inputs.json"
@@ -179,10 +180,7 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
         rig.index([a, b], what=f"--exclusive {a}:{b}")
         if a == b:
             raise InputError(f"--exclusive {a}:{b}: expected two different shapes, found one twice")
-    B = rig.deltas.reshape(rig.n_shapes, -1)
-    targets = (T - rig.neutral).reshape(len(T), -1)
-    G = B @ B.T
-    C = B @ targets.T
+    G, C, consts = gram_data(rig, T)
     out = []
     # shapes the run held at 0 (no support in the examples) stay at 0: certify over the others
     idx = np.flatnonzero(free)
@@ -191,7 +189,7 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     sub_pairs = pos[pairs[(pos[pairs] >= 0).all(axis=1)]] if len(pairs) else pairs
     certifier = CertifiedWeightSolver(G[np.ix_(idx, idx)], sub_pairs, lam)
     for j, name in enumerate(names):
-        const = float(targets[j] @ targets[j])
+        const = float(consts[j])
         held_prior = lam * float(prior[j, ~free] @ prior[j, ~free])  # (0 - x~)^2 of the held weights
         cs = certifier.solve(C[idx, j], const + held_prior, prior[j, idx], start=stored[j, idx])
         x = stored[j]

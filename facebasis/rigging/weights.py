@@ -81,6 +81,20 @@ class WeightSolution:
     certificate_gap: float = float("nan")
 
 
+def gram_data(rig, expressions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Gram quantities of eq. 5 for expressions (m, n, 3) against a rig's blendshapes:
+    ``G = B^T B`` (k, k), ``C = B^T t_j`` (k, m) and ``const = t_j^T t_j`` (m,), with
+    ``t_j = T_j - B_0`` flattened; BLAS on one thread (its spinning threads cost more than they
+    gain for these sizes on a shared machine)."""
+    from threadpoolctl import threadpool_limits
+
+    T = (np.asarray(expressions, np.float64) - rig.neutral).reshape(len(expressions), -1)
+    B = rig.deltas.reshape(rig.n_shapes, -1)
+    with threadpool_limits(1):
+        G, C = B @ B.T, B @ T.T
+    return G, C, np.einsum("ij,ij->i", T, T)
+
+
 def eq5_objective(X, G, C, const, X_prior, lam) -> float:
     """Eq. 5 objective for weights X (m, k), G (k, k), C (k, m), const (m,) = t_j^T t_j."""
     X = np.asarray(X, float)

@@ -292,7 +292,7 @@ def write_tables(out: Path, rows: list[dict], argv_text: str, wall: float):
          "mesh tracking (the default). `detector`: dlib also on every frame, detections fed to the filter "
          "(`--detector`). Capture time is the whole `capture()` call (decode, tracking, mesh, writing the "
          "capture folder; no overlay video). Retarget: ICT's 53 expressions, landmarks68, its 10 natural exclusive "
-         "pairs, smooth 0.05, ridge 1e-3; `rig_neutral` fits ICT's own neutral, `first_frame_neutral` takes frame 0 "
+         "pairs, smooth 0.05, ridge 1e-3 (the default before --ridge auto; see the notes at the end); `rig_neutral` fits ICT's own neutral, `first_frame_neutral` takes frame 0 "
          "as the person's neutral. Residual: per-frame rms landmark residual of the fit (px), mean / p95 / max over "
          "frames. Warp: built-in cartoon (512 x 512) per frame. gap = inner-lip gap / outer eye-corner distance "
          "from the tracked landmarks, gap(dlib) the same from independent dlib detections on every `--ref-stride`-th frame (default 5; ref_frames in the csv); "

@@ -73,6 +73,26 @@ def test_retarget_rig_folder_with_exclusive_pairs(capture, tmp_path, capsys):
     assert summary["exclusive"] == ["mouthLeft:mouthRight", "eyeBlink_L:eyeWide_L", "eyeBlink_R:eyeWide_R"]
 
 
+def test_retarget_ridge_auto_and_given(capture, tmp_path, capsys):
+    folder, _ = capture
+    out = tmp_path / "auto"
+    code, stdout, err = run(["retarget", str(folder), "--out", str(out)], capsys)
+    assert code == 0, err
+    assert "ridge auto" in stdout and "landmark noise" in stdout
+    assert "hint:" not in stdout                        # the built-in face's own capture: no shape difference
+    s = json.loads((out / "summary.json").read_text())
+    assert s["ridge_rule"] == "auto" and s["ridge"] >= 1e-3
+    # 0.2 px per coordinate: rms 2D residual ~0.27 px (1.34 x noise, see test_retarget_rig)
+    assert 0.1 < s["noise_px"] < 0.5
+    out2 = tmp_path / "given"
+    code, stdout, err = run(["retarget", str(folder), "--ridge", "0.01", "--out", str(out2)], capsys)
+    assert code == 0, err
+    s = json.loads((out2 / "summary.json").read_text())
+    assert s["ridge_rule"] == "given" and s["ridge"] == 0.01 and "noise_px" not in s
+    _fails(["retarget", str(folder), "--ridge", "lots", "--out", str(tmp_path / "x")],
+           "--ridge: expected a finite number >= 0, found lots", capsys, tmp_path / "x")
+
+
 def test_animate2d_default_cartoon(capture, tmp_path, capsys):
     folder, _ = capture
     out = tmp_path / "a2"

@@ -6,8 +6,9 @@ import pytest
 from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.errors import InputError, RigError
-from facebasis.retarget.rigdrive import (RigRetargeter, fit_pose_affine, identifiability, project_landmarks,
-                                         retarget_landmarks, rotation_from_vector, rotation_to_vector)
+from facebasis.retarget.rigdrive import (PRIOR_STD, RIDGE_FLOOR, RigRetargeter, auto_ridge, fit_pose_affine,
+                                         identifiability, project_landmarks, retarget_landmarks, rotation_from_vector,
+                                         rotation_to_vector)
 from facebasis.retarget.synthetic import smooth_weight_curves, synthetic_capture
 
 # Shapes animated in the synthetic captures of the built-in face. None of the exclusive pairs is
@@ -185,3 +186,54 @@ def test_first_frame_neutral_absorbs_a_different_face_shape(face):
     still = synthetic_capture(other, idx, X, noise_px=0.0, seed=9, amplitude_deg=0.0)
     exact = RigRetargeter(rig, idx, EXCLUSIVE_PAIRS, first_frame_neutral=True).run(still.landmarks)
     assert np.abs(exact.weights - X)[:, k].mean() < 0.005
+
+
+def test_auto_ridge_rule():
+    # MAP ridge of a N(0, PRIOR_STD^2) prior per weight against landmark noise (rig units)
+    assert auto_ridge(0.0) == RIDGE_FLOOR
+    assert auto_ridge(float("nan")) == RIDGE_FLOOR
+    assert auto_ridge(0.3) == pytest.approx((0.3 / PRIOR_STD) ** 2)
+    assert auto_ridge(0.3, prior_std=0.3) == pytest.approx(1.0)
+    assert auto_ridge(1e-4) == RIDGE_FLOOR
+    with pytest.raises(InputError, match="'auto'"):
+        RigRetargeter(default_template(), face_landmarks(), ridge="big")
+
+
+def test_auto_ridge_follows_the_landmark_noise(face):
+    rig, idx = face
+    X = smooth_weight_curves(rig.names, ("jawOpen", "mouthSmile_L", "eyeBlink_L", "browInnerUp"), 120, seed=4)
+    clean = retarget_landmarks(rig, idx, synthetic_capture(rig, idx, X, noise_px=0.0, seed=4).landmarks,
+                               pairs=EXCLUSIVE_PAIRS)
+    # noise-free: the estimate is ~0, the ridge the floor, the answer as exact as before
+    assert clean.ridge == RIDGE_FLOOR and clean.noise * np.median(clean.scale) < 0.01
+    assert np.abs(clean.weights - X).mean() < 2e-3
+    for noise in (1.0, 2.0):
+        cap = synthetic_capture(rig, idx, X, noise_px=noise, seed=4)
+        auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS)
+        fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR)
+        # rms 2D residual of 68 points with `noise` px per coordinate, less the fitted part: ~1.34 noise
+        px = auto.noise * np.median(auto.scale)
+        assert 1.1 * noise < px < 1.6 * noise
+        assert auto.ridge == pytest.approx((auto.noise / PRIOR_STD) ** 2)
+        # measured 0.029 vs 0.037 (1 px) and 0.042 vs 0.075 (2 px)
+        assert np.abs(auto.weights - X).mean() < np.abs(fixed.weights - X).mean()
+
+
+def test_auto_ridge_keeps_a_calm_face_of_another_shape_calm(face):
+    """The real-video failure in miniature: a neutral face that is not the rig's, seen under head
+    turns; the tiny fixed ridge reads the shape difference as saturated expressions."""
+    from facebasis.defaults.face import default_person
+
+    rig, idx = face
+    other = rig.with_neutral(default_person().neutral, rig.deltas, "other face")
+    calm = np.zeros((120, rig.n_shapes))
+    cap = synthetic_capture(other, idx, calm, noise_px=1.0, seed=4, amplitude_deg=10.0)
+    fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR)
+    auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS)
+    # measured: floor 0.16 mean weight, 3.8% of weights > 0.95; auto (ridge ~0.34) 0.08, none
+    assert (fixed.weights > 0.95).mean() > 0.01
+    assert (auto.weights > 0.95).mean() == 0.0
+    assert auto.weights.mean() < 0.6 * fixed.weights.mean()
+    assert auto.residual.mean() < fixed.residual.mean() + 0.5        # the fit barely changes (px)
+    P = rig.index([n for ab in EXCLUSIVE_PAIRS for n in ab]).reshape(-1, 2)
+    assert np.abs(auto.weights[:, P[:, 0]] * auto.weights[:, P[:, 1]]).max() == 0.0

@@ -34,8 +34,6 @@ def cmd_retarget(args) -> int:
     if args.smooth is not None and not (math.isfinite(args.smooth) and args.smooth >= 0):
         raise InputError(f"--smooth: expected a finite number >= 0, found {args.smooth}")
 
-    if args.ridge is not None and not (math.isfinite(args.ridge) and args.ridge >= 0):
-        raise InputError(f"--ridge: expected a finite number >= 0, found {args.ridge}")
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      ridge=args.ridge, neutral=args.neutral, first_frame_neutral=args.first_frame_neutral, log=print)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
@@ -91,13 +89,21 @@ def register(subparsers) -> None:
     p.add_argument("--smooth", type=float, default=None, metavar="S",
                    help="temporal smoothness: weight of the change from the previous frame (default 0.05; 0 "
                         "solves every frame on its own)")
-    p.add_argument("--ridge", type=float, default=None, metavar="R",
-                   help="pull of every weight towards 0, in the rig's squared units (default 0.001); on real "
-                        "video, where landmarks are noisy and the face is not the rig's, 0.05-0.2 keeps shapes "
-                        "from saturating (measured on a webcam clip: see reports/reproduction)")
+    p.add_argument("--ridge", default=None, metavar="R|auto",
+                   help="pull of every weight towards 0, in the rig's squared units (rig units after dividing "
+                        "the pixels by the head's scale). Default 'auto': (noise / 0.5)^2, at least 0.001, where "
+                        "noise is the median rms landmark residual (rig units) of up to 40 evenly spaced frames "
+                        "each fitted on its own, i.e. a "
+                        "prior of standard deviation 0.5 on every weight against the capture's own landmark noise; "
+                        "0.001 on noise-free data, about 0.2 on a webcam clip with --first-frame-neutral, so "
+                        "shapes stop saturating on noise and face-shape differences (see reports/reproduction). "
+                        "A number fixes it")
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="the first frame shows the neutral face: adapt the rig's landmark positions to it, so "
-                        "differences between the tracked face's shape and the rig's are not read as expression")
+                        "differences between the tracked face's shape and the rig's are not read as expression. "
+                        "Off by default (wrong when the capture starts on an expression); recommended on real video "
+                        "that starts on a calm face: the log prints a hint when the rig's neutral fits the "
+                        "landmarks poorly")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_retarget)
 

@@ -218,28 +218,68 @@ def write_retarget_outputs(stage: Path, rig, result, pairs_named, extra: dict | 
     return summary
 
 
+def _parse_ridge(ridge):
+    """None -> the default ("auto"); "auto" stays; anything else a finite number >= 0."""
+    from .rigdrive import DEFAULT_RIDGE
+
+    if ridge is None:
+        return DEFAULT_RIDGE
+    if isinstance(ridge, str) and ridge.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(ridge)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (np.isfinite(value) and value >= 0):
+        raise InputError(f"--ridge: expected a finite number >= 0, found {ridge} (or 'auto', the default)")
+    return value
+
+
+#: relative landmark noise (rms residual over the rms landmark radius of the rig) above which the
+#: retarget log suggests --first-frame-neutral: ~1% for 1 px noise on a synthetic 20 px/cm face,
+#: 7% on a real webcam clip fitted with ICT's own neutral (the face shape is not ICT's)
+FIRST_FRAME_HINT = 0.03
+
+
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool = False,
                  log=None) -> dict:
-    """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`)."""
-    from ..rigging.examples import parse_pairs
-    from .rigdrive import DEFAULT_RIDGE, DEFAULT_SMOOTH, RigRetargeter, resolve_pairs
+    """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
+    ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
+    (:func:`.rigdrive.auto_ridge`); a number fixes it.
+    """
+    from ..rigging.examples import parse_pairs
+    from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_pairs
+
+    ridge = _parse_ridge(ridge)
     cap = read_capture(capture_dir)
     r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
-    ridge = DEFAULT_RIDGE if ridge is None else float(ridge)
     solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, first_frame_neutral=first_frame_neutral)
+    ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
-         + f"; smooth {smooth:g}, ridge {ridge:g}")
+         + f"; smooth {smooth:g}, ridge {ridge_text}")
     result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
+    extra = {"smooth": smooth, "ridge": result.ridge, "ridge_rule": "auto" if ridge == "auto" else "given",
+             "solver": solver, "first_frame_neutral": first_frame_neutral}
+    if ridge == "auto":
+        v0 = r.neutral[idx]
+        radius = float(np.sqrt(np.mean(np.sum((v0 - v0.mean(0)) ** 2, axis=1))))
+        relative = result.noise / radius if radius > 0 else float("nan")
+        noise_px = result.noise * float(np.nanmedian(result.scale))
+        extra.update({"noise_rig_units": result.noise, "noise_px": noise_px, "noise_relative": relative})
+        _log(log, f"landmark noise {noise_px:.2f} px ({result.noise:.3g} rig units, {100 * relative:.1f}% of the "
+                  f"face's landmark radius): ridge {result.ridge:.3g}")
+        if not first_frame_neutral and relative > FIRST_FRAME_HINT:
+            _log(log, "hint: the rig's neutral reproduces these landmarks poorly (the face's shape is not the "
+                      "rig's, or its landmarks are defined differently); if the capture starts on a neutral face, "
+                      "--first-frame-neutral takes it as the neutral and the weights stop absorbing the difference")
     with atomic_directory(out_dir) as stage:
-        summary = write_retarget_outputs(stage, r, result, named, {"smooth": smooth, "ridge": ridge,
-                                                                    "solver": solver,
-                                                                    "first_frame_neutral": first_frame_neutral})
+        summary = write_retarget_outputs(stage, r, result, named, extra)
     return summary
 
 

@@ -18,8 +18,8 @@ previous frame, pose and weights are alternated:
       min_x  (1/s^2) || A x - b ||^2 + mu || x - x_prev ||^2 + rho || x ||^2
       s.t.   0 <= x <= 1,   x_a x_b = 0 for exclusive pairs (a, b),
 
-  the data term measured in rig units (divided by s^2), mu the temporal smoothness, rho a small
-  ridge that keeps shapes the landmarks cannot see at zero. Since
+  the data term measured in rig units (divided by s^2), mu the temporal smoothness (default 0.05),
+  rho the ridge that keeps shapes the landmarks cannot see, or cannot tell from noise, at zero. Since
   ``mu ||x - x_prev||^2 + rho ||x||^2 = (mu + rho) ||x - mu/(mu + rho) x_prev||^2 + const``,
   this is exactly the certified solver's ``lam ||x - prior||^2`` with ``lam = mu + rho`` and
   ``prior = mu/(mu + rho) x_prev``; it is solved to a certified global optimum by
@@ -28,6 +28,20 @@ previous frame, pose and weights are alternated:
   certificate (``solver="ipopt"``, slower, same answer).
 
 Landmarks marked lost are left out of both steps of that frame.
+
+Default ridge, ``ridge="auto"``: ``rho = max(1e-3, (noise / 0.5)^2)`` (:func:`auto_ridge`), where
+``noise`` (rig units) is the median, over up to 40 evenly spaced frames each fitted on its own with
+rho = 1e-3 and mu = 0, of the rms landmark residual divided by that frame's scale s
+(:meth:`RigRetargeter.estimate_noise`). With the data term in rig units this is the MAP ridge of a
+Gaussian prior of standard deviation 0.5 on every weight against landmark noise of that size; the
+noise holds whatever the rig cannot reproduce (tracker jitter, a face shape that is not the rig's,
+landmark definitions that differ from the rig's). Measured (reports/reproduction/real_clips_notes.md):
+noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 px synthetic noise at
+20 px/cm gives rho ~0.004 / 0.015 and a lower weight error than 1e-3; a 400-frame dlib webcam capture
+(6.7 px/cm) gives rho 0.49 with ICT's own neutral and 0.20 with ``first_frame_neutral``, and no
+weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
+``first_frame_neutral`` stays off by default (it is wrong when the capture starts on an expression);
+the ``retarget`` command prints a hint when the neutral fits the landmarks poorly.
 """
 
 from __future__ import annotations
@@ -44,8 +58,27 @@ from ..geometry.rig import Rig
 PI = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 #: default temporal smoothness mu (rig units^2 per unit weight^2)
 DEFAULT_SMOOTH = 0.05
-#: default ridge rho towards the neutral
-DEFAULT_RIDGE = 1e-3
+#: default ridge rho towards the neutral: set from the capture's landmark noise (see :func:`auto_ridge`)
+DEFAULT_RIDGE = "auto"
+#: smallest ridge of the "auto" rule (and the pilot fit's ridge): noise-free captures are solved with it
+RIDGE_FLOOR = 1e-3
+#: prior standard deviation of a weight in the "auto" rule, rho = (noise / s / PRIOR_STD)^2
+PRIOR_STD = 0.5
+#: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
+PILOT_FRAMES = 40
+
+
+def auto_ridge(noise_rig: float, prior_std: float = PRIOR_STD, floor: float = RIDGE_FLOOR) -> float:
+    """The "auto" ridge ``max(floor, (noise_rig / prior_std)^2)``.
+
+    ``noise_rig`` is the landmark noise in rig units (rms landmark residual in pixels divided by the
+    pose scale s). With the data term in rig units, this is the MAP ridge of a Gaussian prior of
+    standard deviation ``prior_std`` on every weight against Gaussian landmark noise of that size:
+    ``||A x - b||^2 / noise^2 + ||x||^2 / prior_std^2`` times ``noise^2``.
+    """
+    if not np.isfinite(noise_rig) or noise_rig < 0:
+        return float(floor)
+    return float(max(floor, (noise_rig / prior_std) ** 2))
 
 
 def rotation_from_vector(w) -> np.ndarray:
@@ -147,6 +180,9 @@ class RetargetResult:
     nodes : (T,) branch-and-bound nodes of the last weight solve of each frame
     fps : frames per second of the capture
     seconds : wall time of the solve
+    ridge : the ridge rho the frames were solved with (the "auto" rule's value when it was used)
+    noise : landmark noise estimate of the "auto" rule, rig units (rms residual px / s of the pilot
+        fit; nan when the ridge was given)
     """
 
     names: tuple[str, ...]
@@ -158,6 +194,8 @@ class RetargetResult:
     nodes: np.ndarray
     fps: float
     seconds: float
+    ridge: float = float("nan")
+    noise: float = float("nan")
 
     @property
     def n_frames(self) -> int:
@@ -210,7 +248,9 @@ class RigRetargeter:
     indices : (L,) landmark vertex indices on the rig (the capture's landmark order)
     pairs : exclusive shape pairs (names or indices), complementarity ``x_a x_b = 0``
     smooth : mu, temporal smoothness (rig units^2; 0 solves frames independently)
-    ridge : rho, pull towards the neutral (keeps unobservable shapes at 0)
+    ridge : rho, pull towards the neutral (keeps unobservable shapes at 0), rig units^2; "auto" (the
+        default) sets it per capture from the landmark noise, see :meth:`estimate_noise` and
+        :func:`auto_ridge`
     alternations : most pose/weight rounds per frame (the first frame, which starts from the neutral,
         gets at least 6); a frame stops once a round changes no weight by more than ``tol``
     tol : weight change that ends the rounds of a frame (warm-started frames usually need 2)
@@ -223,6 +263,11 @@ class RigRetargeter:
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
                  first_frame_neutral: bool = False):
+        self.auto = isinstance(ridge, str)
+        if self.auto:
+            if ridge != "auto":
+                raise InputError(f"ridge: expected a finite number >= 0 or 'auto', found {ridge!r}")
+            ridge = RIDGE_FLOOR
         for name, v in (("smooth", smooth), ("ridge", ridge)):
             if not np.isfinite(v) or v < 0:
                 raise InputError(f"{name}: expected a finite number >= 0, found {v}")
@@ -238,6 +283,7 @@ class RigRetargeter:
         self.pairs = resolve_pairs(rig, pairs)
         self.smooth, self.ridge, self.alternations, self.solver = float(smooth), float(ridge), int(alternations), solver
         self.tol = float(tol)
+        self.noise = float("nan")                                 # set by run() when the ridge is "auto"
         self.first_frame_neutral = bool(first_frame_neutral)
         self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() if first_frame_neutral
         self.D = np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0))   # (L, 3, k)
@@ -324,6 +370,31 @@ class RigRetargeter:
         r = np.where(vis[:, None], p - (s * (self.v0 @ R.T @ PI.T) + t), 0.0)
         self.v0 = self.v0 + (r @ PI @ R) / s
 
+    def estimate_noise(self, landmarks, visible) -> float:
+        """Landmark noise of a capture in rig units, for the "auto" ridge.
+
+        Up to :data:`PILOT_FRAMES` frames, evenly spaced, are each fitted on their own (pose and
+        weights, no temporal term, ridge :data:`RIDGE_FLOOR`); the estimate is the median over them of
+        the rms landmark residual divided by the frame's scale s. It holds whatever the rig cannot
+        reproduce: tracker noise, a face shape that differs from the rig's, landmark definitions that
+        differ from the rig's landmark vertices. Noise-free captures of the rig give ~0.
+        """
+        T = len(landmarks)
+        frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
+        keep = self.smooth, self.ridge
+        self.smooth, self.ridge = 0.0, RIDGE_FLOOR
+        out = []
+        try:
+            for f in frames:
+                if visible[f].sum() < 4:
+                    continue
+                _, s, _, _, rms, _ = self.solve_frame(landmarks[f], visible[f], None)
+                if np.isfinite(rms) and s > 0:
+                    out.append(rms / s)
+        finally:
+            self.smooth, self.ridge = keep
+        return float(np.median(out)) if out else float("nan")
+
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
         """Solve every frame in order. landmarks (T, L, 2); lost (T, L) bool (skipped)."""
         P = np.asarray(landmarks, np.float64)
@@ -340,13 +411,17 @@ class RigRetargeter:
         self.v0 = self.rig.neutral[self.indices].copy()
         if self.first_frame_neutral:
             self._adopt_first_frame(np.nan_to_num(P[0]), vis[0])
+        if self.auto:
+            self.noise = self.estimate_noise(np.nan_to_num(P), vis)
+            self.ridge = auto_ridge(self.noise)
         for f in range(T):               # frames in order, each warm-started from the previous one
             x, s, R, t, r, n = self.solve_frame(np.nan_to_num(P[f]), vis[f], state)
             X[f], S[f], Rs[f], Ts[f], res[f], nodes[f] = x, s, R, t, r, n
             state = (x, s, R, t)
             if progress is not None:
                 progress(f, T)
-        return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0)
+        return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0,
+                              self.ridge, self.noise if self.auto else float("nan"))
 
 
 def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth: float = DEFAULT_SMOOTH,
@@ -428,4 +503,4 @@ def identifiability(rig: Rig, indices) -> Identifiability:
 __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
            "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
            "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
-           "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "PI"]
+           "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]

@@ -91,6 +91,32 @@ def test_transfer_rejects_bad_target():
         DeformationTransfer(rig, flat)
 
 
+def test_transfer_with_an_extra_operator_matches_the_edge_solve():
+    """DeformationTransfer's frame-delta layout with an extra operator gives what EdgePoisson.solve
+    gives for the same triangle edges, anchors and extra targets (k, r, 3); transfer() alone
+    cannot know the extra targets and says where to pass them."""
+    import scipy.sparse as sp
+
+    from facebasis.errors import InputError
+    from facebasis.geometry.gradients import frame_edges_to_triangle_edges
+
+    rig = sheet_rig()
+    n = rig.n_vertices
+    pairs = np.array([[0, 30], [5, 60], [12, 47]])
+    X = sp.csr_matrix((np.tile([1.0, -1.0], 3), (np.repeat(np.arange(3), 2), pairs[:, ::-1].ravel())), shape=(3, n))
+    dt = DeformationTransfer(rig, rig.neutral * 1.1, extra_operator=X, extra_weight=4.0)
+    assert dt.poisson.extra_operator.shape == (3, n)
+    Y = dt.transferred_frame_deltas()  # (k, 3, 2, m)
+    k = len(Y)
+    A = dt.anchor_values()
+    XT = np.random.default_rng(2).standard_normal((k, 3, 3))  # (k, r, 3)
+    out = dt.solve_frame_deltas(Y, A, extra_targets=np.ascontiguousarray(np.moveaxis(XT, 2, 1)).reshape(3 * k, -1))
+    ref = dt.poisson.solve(frame_edges_to_triangle_edges(np.moveaxis(Y, -1, -3)), A, extra_targets=XT)
+    assert np.abs(out - ref).max() <= 1e-10 * np.abs(ref).max()
+    with pytest.raises(InputError, match=r"solve_frame_deltas\(\.\.\., extra_targets=\.\.\.\)"):
+        dt.transfer()
+
+
 @requires_ict
 @pytest.mark.ict
 def test_ict_transfer_close_to_ict_additive_expressions():

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+from cholespy import CholeskySolverD, MatrixType
 
 from ..errors import InputError, MeshError
 from .gradients import edge_operator, frame_edge_operator
@@ -73,6 +73,10 @@ def choose_anchors(F: np.ndarray, n_vertices: int, motion: np.ndarray | None = N
 class EdgePoisson:
     """Factor-once least-squares reconstruction of vertex values from triangle edges.
 
+    Minimises ``sum_t c_t ||(E d)_t - e*_t||^2 + w ||X d - x*||^2`` over the vertex values ``d``
+    with ``d`` prescribed at the anchors: ``E`` (3m, n) is the triangle edge operator, ``X`` (r, n)
+    an optional extra operator (e.g. virtual edges) with targets ``x*``.
+
     Parameters
     ----------
     F : (m, 3) triangles
@@ -80,19 +84,31 @@ class EdgePoisson:
     anchors : (a,) vertex indices whose values are prescribed at solve time; must hit every
         connected component
     triangle_weights : (m,) optional non-negative weights ``c_t`` (default 1)
-    extra_rows : optional sparse (r, n) operator of additional "edges" (e.g. virtual edges) whose
-        targets are passed to :meth:`solve` as ``extra_targets``; with ``extra_weight``.
-    extra_weight : weight of the extra rows in the least-squares energy
+    extra_operator : optional sparse (r, n) operator ``X`` of additional "edges" (e.g. virtual
+        edges); its targets are the ``extra_targets`` of :meth:`solve` / :meth:`solve_frame_rows`
+    extra_weight : weight ``w`` of the extra operator in the energy; the operator is ignored
+        unless ``w > 0`` and ``r > 0``
+
+    Attributes
+    ----------
+    anchors : (a,) sorted unique anchor indices (the order of ``anchor_values``)
+    free : (f,) the other vertices
+    extra_operator : csr (r, n) or None (None when ignored)
+    extra_weight : float
 
     Notes
     -----
     Building costs one sparse Cholesky factorisation (CHOLMOD, through cholespy) of the
     free-vertex block of ``L = E^T C E + w X^T X``, which is symmetric positive definite once every
-    component is anchored; :meth:`solve` is then a pair of triangular solves for all right-hand
+    component is anchored; a solve is then a pair of triangular solves for all right-hand
     sides at once (3x faster than SuperLU's LU solve on the ICT mesh with 159 right-hand sides).
+
+    Two entry points, for two layouts of the same problem: :meth:`solve` (triangle edge targets,
+    batch axes first) and :meth:`solve_frame_rows` (frame edge columns, one problem per column of
+    C-contiguous arrays, nothing copied: the generation hot path).
     """
 
-    def __init__(self, F, n_vertices: int, anchors, triangle_weights=None, extra_rows=None,
+    def __init__(self, F, n_vertices: int, anchors, triangle_weights=None, extra_operator=None,
                  extra_weight: float = 0.0):
         F = np.asarray(F, dtype=np.int64)
         self.n_vertices = int(n_vertices)
@@ -121,44 +137,36 @@ class EdgePoisson:
             E_w = E
         self._Et = E_w.T.tocsr()  # E^T C, applied to edge targets
         self._Ew = E_w
-        self._frame_op = None  # (2m, n) operator of frame edge columns, built on first use
+        self._frame_op = None  # (n, 2m) operator of frame edge columns, built on first use
         L = (E.T @ E_w).tocsr()
-        self.extra_rows = None
+        self.extra_operator = None
         self.extra_weight = float(extra_weight)
-        if extra_rows is not None and extra_rows.shape[0] > 0 and extra_weight > 0:
-            X = sp.csr_matrix(extra_rows)
-            self.extra_rows = X
-            self._Xt = (self.extra_weight * X.T).tocsr()
+        if extra_operator is not None and extra_operator.shape[0] > 0 and extra_weight > 0:
+            if extra_operator.shape[1] != n_vertices:
+                raise InputError(f"extra_operator: expected shape (r, {n_vertices}), found {extra_operator.shape}")
+            X = sp.csr_matrix(extra_operator)
+            self.extra_operator = X
+            self._Xt = (self.extra_weight * X.T).tocsr()  # w X^T, applied to extra targets
             L = L + self.extra_weight * (X.T @ X)
         L = L.tocsc()
         self._L_fa = L[self.free][:, anchors].tocsc()
         L_ff = L[self.free][:, self.free].tocsc()
-        self._chol = None
-        self._lu = None
+        coo = L_ff.tocoo()
         try:
-            from cholespy import CholeskySolverD, MatrixType
-
-            coo = L_ff.tocoo()
             self._chol = CholeskySolverD(coo.shape[0], coo.row.astype(np.int32), coo.col.astype(np.int32),
                                          coo.data.astype(np.float64), MatrixType.COO)
-        except ImportError:  # pragma: no cover - cholespy is a declared dependency
-            self._chol = None
         except (RuntimeError, ValueError) as exc:  # not positive definite: a part without anchor
             raise MeshError(f"reconstruction: the edge system is singular ({exc}); check for isolated vertices") from exc
-        if self._chol is None:  # pragma: no cover
-            try:
-                self._lu = spla.splu(L_ff, permc_spec="COLAMD")
-            except RuntimeError as exc:
-                raise MeshError(f"reconstruction: the edge system is singular ({exc}); check for isolated vertices") from exc
 
-    def _solve_free(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve ``L_ff x = rhs`` for (f, c) right-hand sides with the stored factorisation."""
-        rhs = np.ascontiguousarray(rhs, dtype=np.float64)
-        if self._chol is not None:
-            x = np.zeros_like(rhs)
-            self._chol.solve(rhs, x)
-            return x
-        return self._lu.solve(rhs)
+    @property
+    def extra_rows(self):
+        """Alias of :attr:`extra_operator` (read-only), kept for :mod:`facebasis.contact.exact`."""
+        return self.extra_operator
+
+    @property
+    def n_extra(self) -> int:
+        """r, the number of extra rows (0 without an extra operator)."""
+        return 0 if self.extra_operator is None else self.extra_operator.shape[0]
 
     def solve(self, edge_targets: np.ndarray, anchor_values: np.ndarray | None = None,
               extra_targets: np.ndarray | None = None) -> np.ndarray:
@@ -167,40 +175,66 @@ class EdgePoisson:
         Parameters
         ----------
         edge_targets : (..., m, 3, d) target vectors of the three edges of every triangle
-            (order of :data:`facebasis.geometry.gradients.EDGE_CORNERS`); leading axes are batched
-        anchor_values : (..., a, d) values at the anchors (default 0)
-        extra_targets : (..., r, d) targets of the extra rows, if any
+            (order of :data:`facebasis.geometry.gradients.EDGE_CORNERS`); the leading axes ``...``
+            are a batch of independent problems sharing the factorisation
+        anchor_values : (..., a, d) values at :attr:`anchors` (broadcast over the batch; default 0)
+        extra_targets : (..., r, d) targets of the extra operator's rows; required when there is an
+            extra operator, ignored otherwise
 
         Returns
         -------
-        values : (..., n, d)
+        values : (..., n, d) float64
         """
         T = np.asarray(edge_targets, dtype=np.float64)
-        if T.shape[-3:-1] != (self.n_faces, 3):
+        if T.ndim < 3 or T.shape[-3:-1] != (self.n_faces, 3):
             raise InputError(f"edge_targets: expected shape (..., {self.n_faces}, 3, d), found {T.shape}")
         batch, d = T.shape[:-3], T.shape[-1]
         k = int(np.prod(batch)) if batch else 1
-        # columns are (batch, coordinate) pairs; rows are the 3m triangle edges
+        # columns (c = k d) are (batch, coordinate) pairs; rows are the 3m triangle edges
         cols = np.moveaxis(T.reshape(k, 3 * self.n_faces, d), 2, 1).reshape(k * d, 3 * self.n_faces)
-        a_cols = None
+        a_vals = None
         if anchor_values is not None:
             A = np.broadcast_to(np.asarray(anchor_values, dtype=np.float64), batch + (len(self.anchors), d))
-            a_cols = np.moveaxis(A.reshape(k, len(self.anchors), d), 2, 1).reshape(k * d, len(self.anchors))
-        x_cols = None
-        if extra_targets is not None:
-            X = np.asarray(extra_targets, dtype=np.float64).reshape(k, -1, d)
-            x_cols = np.moveaxis(X, 2, 1).reshape(k * d, -1)
-        out = self.solve_columns(cols, a_cols, x_cols)  # (k*d, n)
-        return np.moveaxis(out.reshape(k, d, self.n_vertices), 1, 2).reshape(batch + (self.n_vertices, d))
+            a_vals = np.moveaxis(A.reshape(k, len(self.anchors), d), 2, 1).reshape(k * d, len(self.anchors)).T
+        x_vals = None
+        if extra_targets is not None and self.extra_operator is not None:
+            X = np.asarray(extra_targets, dtype=np.float64)
+            if X.shape[-2:] != (self.n_extra, d):
+                raise InputError(f"extra_targets: expected shape (..., {self.n_extra}, {d}), found {X.shape}")
+            x_vals = np.moveaxis(X.reshape(k, -1, d), 2, 1).reshape(k * d, -1).T
+        out = self._solve_rhs(np.asarray(self._Et @ cols.T), a_vals, x_vals)  # (n, k d)
+        return np.moveaxis(out.T.reshape(k, d, self.n_vertices), 1, 2).reshape(batch + (self.n_vertices, d))
 
-    def solve_columns(self, edge_cols: np.ndarray, anchor_cols: np.ndarray | None = None,
-                      extra_cols: np.ndarray | None = None) -> np.ndarray:
-        """Low-level solve: ``edge_cols`` (c, 3m) edge targets, one problem per row.
+    def solve_frame_rows(self, frame_rows: np.ndarray, anchor_values: np.ndarray | None = None,
+                         extra_targets: np.ndarray | None = None) -> np.ndarray:
+        """Fast path: solve c problems given as columns of frame edge targets.
 
-        ``anchor_cols`` (c, a) and ``extra_cols`` (c, r) are the matching anchor values and extra
-        row targets. Returns (c, n). All c problems share the one factorisation.
+        Parameters
+        ----------
+        frame_rows : (2m, c) frame edge columns of every problem: row ``t`` is the first edge
+            ``v2 - v1`` of triangle t, row ``m + t`` its second edge ``v3 - v1`` (the layout of
+            :func:`~facebasis.geometry.gradients.frame_edge_operator`); one column per problem
+            (e.g. one coordinate of one shape)
+        anchor_values : (a, c) values at :attr:`anchors` (default 0)
+        extra_targets : (r, c) targets of the extra operator's rows; required when there is an
+            extra operator, ignored otherwise
+
+        Returns
+        -------
+        values : (n, c) float64
+
+        Notes
+        -----
+        The triangle's third edge is implied by the first two. With C-contiguous float64 inputs
+        nothing is copied: the right-hand sides are one sparse-times-dense product
+        ``(E^T C S) frame_rows``.
         """
-        return self._solve_rhs(np.asarray(self._Et @ edge_cols.T), anchor_cols, extra_cols)
+        if frame_rows.ndim != 2 or frame_rows.shape[0] != 2 * self.n_faces:
+            raise InputError(f"frame_rows: expected shape ({2 * self.n_faces}, c), found {frame_rows.shape}")
+        rhs = self._frame_operator() @ frame_rows
+        if self.extra_operator is None:
+            extra_targets = None
+        return self._solve_rhs(rhs, anchor_values, extra_targets)
 
     def _frame_operator(self):
         """``E^T C S`` (n, 2m) with S = :func:`~facebasis.geometry.gradients.frame_edge_operator`: frame edge
@@ -209,36 +243,32 @@ class EdgePoisson:
             self._frame_op = (self._Ew.T @ frame_edge_operator(self.n_faces)).tocsr()
         return self._frame_op
 
-    def solve_frame_columns(self, frame_cols: np.ndarray, anchor_cols: np.ndarray | None = None,
-                            extra_cols: np.ndarray | None = None) -> np.ndarray:
-        """Like :meth:`solve_columns`, from frame edge columns (c, 2m), one problem per row:
-        ``[a_1..a_m, b_1..b_m]`` of one coordinate of one shape. Returns (c, n)."""
-        rows = np.ascontiguousarray(np.asarray(frame_cols, dtype=np.float64).T)
-        a_rows = None if anchor_cols is None else np.ascontiguousarray(np.asarray(anchor_cols).T)
-        e_rows = None if extra_cols is None else np.ascontiguousarray(np.asarray(extra_cols).T)
-        return self.solve_frame_rows(rows, a_rows, e_rows).T
-
-    def solve_frame_rows(self, frame_rows: np.ndarray, anchor_rows: np.ndarray | None = None,
-                         extra_rows: np.ndarray | None = None) -> np.ndarray:
-        """The transposed layout of :meth:`solve_frame_columns`: frame_rows (2m, c), anchor_rows
-        (a, c), extra_rows (r, c) -> (n, c). With C-contiguous inputs nothing is copied: the
-        right-hand sides are one sparse-times-dense product ``(E^T C S) frame_rows``."""
-        rhs = self._frame_operator() @ frame_rows
-        return self._solve_rhs(rhs, None if anchor_rows is None else anchor_rows.T,
-                               None if extra_rows is None else extra_rows.T, transposed=True)
-
-    def _solve_rhs(self, rhs: np.ndarray, anchor_cols, extra_cols, transposed: bool = False) -> np.ndarray:
-        """Solve for right-hand sides rhs (n, c); returns (c, n), or (n, c) if ``transposed``."""
+    def _solve_rhs(self, rhs: np.ndarray, anchor_values, extra_targets) -> np.ndarray:
+        """Right-hand sides ``E^T C e*`` (n, c), anchor values (a, c) or None, extra targets (r, c)
+        or None -> vertex values (n, c)."""
         c = rhs.shape[1]
-        if self.extra_rows is not None:
-            if extra_cols is None:
+        if self.extra_operator is not None:
+            if extra_targets is not None:
+                extra_targets = np.asarray(extra_targets, dtype=np.float64)
+            if extra_targets is None:
                 raise InputError("extra_targets: expected targets for the extra (virtual edge) rows, found none")
-            rhs = rhs + self._Xt @ np.asarray(extra_cols).T
+            if extra_targets.shape != (self.n_extra, c):
+                raise InputError(f"extra_targets: expected shape ({self.n_extra}, {c}), found {extra_targets.shape}")
+            rhs = rhs + self._Xt @ extra_targets
         out = np.empty((self.n_vertices, c))
-        a_vals = np.zeros((len(self.anchors), c)) if anchor_cols is None else np.asarray(anchor_cols).T
-        out[self.anchors] = a_vals
-        b = rhs[self.free]
-        if anchor_cols is not None:
-            b -= self._L_fa @ np.ascontiguousarray(a_vals)
-        out[self.free] = self._solve_free(b)
-        return out if transposed else out.T
+        if anchor_values is None:
+            out[self.anchors] = 0.0
+            b = rhs[self.free]
+        else:
+            anchor_values = np.asarray(anchor_values, dtype=np.float64)
+            if anchor_values.shape != (len(self.anchors), c):
+                raise InputError(f"anchor_values: expected shape ({len(self.anchors)}, {c}), "
+                                 f"found {anchor_values.shape}")
+            out[self.anchors] = anchor_values
+            b = rhs[self.free]
+            b -= self._L_fa @ np.ascontiguousarray(anchor_values)
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        x = np.zeros_like(b)
+        self._chol.solve(b, x)
+        out[self.free] = x
+        return out

@@ -49,7 +49,8 @@ class DeformationTransfer:
     template : Rig, the source rig ``S_0, S_1..S_k``
     target_neutral : (n, 3) the target's neutral ``B_0`` in the template's topology
     anchors : optional (a,) anchor vertices (default :func:`rig_anchors`)
-    extra_rows, extra_weight : optional additional rows for :class:`EdgePoisson`
+    extra_operator, extra_weight : optional extra least-squares rows (sparse (r, n) operator and
+        its weight) for :class:`EdgePoisson`; their targets go to :meth:`solve_frame_deltas`
     virtual_edges : optional extra edge term, e.g. :class:`facebasis.contact.virtual_edges.VirtualEdges`
         (Li, Shen, Liu 2023): adds ``virtual_weight * sum ||(x_v - x_u) - t_i||^2`` to the solve.
         Geometry does not import the contact method; it uses the object's interface: ``n_vertices``,
@@ -66,7 +67,7 @@ class DeformationTransfer:
     """
 
     def __init__(self, template: Rig, target_neutral: np.ndarray, anchors=None,
-                 extra_rows=None, extra_weight: float = 0.0, virtual_edges=None,
+                 extra_operator=None, extra_weight: float = 0.0, virtual_edges=None,
                  virtual_weight: float | None = None, virtual_mode: str = "proportional"):
         B0 = validate_vertices(target_neutral, "target neutral", template.n_vertices)
         validate_mesh(B0, template.faces, "target neutral")
@@ -84,18 +85,18 @@ class DeformationTransfer:
         if virtual_edges is not None:
             if virtual_mode not in virtual_edges.modes:
                 raise InputError(f"virtual edge mode: expected one of {virtual_edges.modes}, found {virtual_mode!r}")
-            if extra_rows is not None:
-                raise InputError("DeformationTransfer: expected either virtual_edges or extra_rows, found both")
+            if extra_operator is not None:
+                raise InputError("DeformationTransfer: expected either virtual_edges or extra_operator, found both")
             if virtual_edges.n_vertices != template.n_vertices:
                 raise InputError(f"virtual edges ({virtual_edges.source}): expected a mesh of {template.n_vertices} "
                                  f"vertices, found edges for {virtual_edges.n_vertices}")
             extra_weight = virtual_edges.default_weight if virtual_weight is None else float(virtual_weight)
             if not (extra_weight > 0 and np.isfinite(extra_weight)):
                 raise InputError(f"virtual edge weight: expected a positive number, found {extra_weight}")
-            extra_rows = virtual_edges.operator() if len(virtual_edges) else None
+            extra_operator = virtual_edges.operator() if len(virtual_edges) else None
         self.virtual_weight = extra_weight
         self.poisson = EdgePoisson(F, template.n_vertices, self.anchors,
-                                   extra_rows=extra_rows, extra_weight=extra_weight)
+                                   extra_operator=extra_operator, extra_weight=extra_weight)
 
     def gradients(self, deltas: np.ndarray | None = None) -> np.ndarray:
         """Deformation gradients ``Q_i = A_i^S (A_0^S)^-1`` of the template shapes, (k, m, 3, 3)."""
@@ -119,22 +120,36 @@ class DeformationTransfer:
         return np.einsum("kxct,cjt->kxjt", dA, self._M, optimize=True)
 
     def solve_frame_deltas(self, frame_deltas: np.ndarray, anchor_values: np.ndarray | None = None,
-                           extra_cols: np.ndarray | None = None) -> np.ndarray:
-        """Vertex deltas (k, n, 3) whose triangle edges best match frame edge columns (k, 3, 2, m)."""
-        k = frame_deltas.shape[0]
-        a_cols = None
-        if anchor_values is not None:  # (k, a, 3) -> (k*3, a)
-            a_cols = np.moveaxis(anchor_values, 2, 1).reshape(k * 3, -1)
-        m = frame_deltas.shape[-1]
+                           extra_targets: np.ndarray | None = None) -> np.ndarray:
+        """Vertex deltas whose triangle edges best match the given frame edge columns.
+
+        Parameters
+        ----------
+        frame_deltas : (k, 3, 2, m) frame edge columns (:meth:`transferred_frame_deltas`)
+        anchor_values : (k, a, 3) deltas at :attr:`anchors` (default 0; :meth:`anchor_values`)
+        extra_targets : (k*3, r) targets of the extra rows, row ``3 i + x`` = coordinate x of
+            shape i (:meth:`virtual_edge_cols`); required with virtual edges or an extra operator
+
+        Returns
+        -------
+        deltas : (k, n, 3)
+        """
+        k, m = frame_deltas.shape[0], frame_deltas.shape[-1]
+        # EdgePoisson.solve_frame_rows takes one problem per column: (2m, 3k), (a, 3k), (r, 3k)
         cols = np.ascontiguousarray(frame_deltas, dtype=np.float64).reshape(k * 3, 2 * m)
-        out = self.poisson.solve_frame_columns(cols, a_cols, extra_cols)
-        return np.moveaxis(out.reshape(k, 3, -1), 1, 2)
+        rows = np.ascontiguousarray(cols.T)
+        a_rows = None
+        if anchor_values is not None:  # (k, a, 3) -> (a, k*3)
+            a_rows = np.ascontiguousarray(np.moveaxis(anchor_values, 2, 1).reshape(k * 3, -1).T)
+        x_rows = None if extra_targets is None else np.ascontiguousarray(np.asarray(extra_targets).T)
+        out = self.poisson.solve_frame_rows(rows, a_rows, x_rows)  # (n, k*3)
+        return np.moveaxis(out.T.reshape(k, 3, -1), 1, 2)
 
     def virtual_edge_cols(self, deltas: np.ndarray | None = None, frame_deltas=None) -> np.ndarray | None:
         """Targets of the virtual-edge rows for template shapes ``deltas`` (k, n, 3), laid out as
-        ``extra_cols`` (k*3, e) of :meth:`solve_frame_deltas`; None without virtual edges.
+        ``extra_targets`` (k*3, e) of :meth:`solve_frame_deltas`; None without virtual edges.
         ``frame_deltas`` (k, 3, 3, m): those shapes' ``A_i^S - A_0^S`` if already computed."""
-        if self.virtual_edges is None or self.poisson.extra_rows is None:
+        if self.virtual_edges is None or self.poisson.extra_operator is None:
             return None
         D = self.template.deltas if deltas is None else deltas
         T = self.virtual_edges.targets(self.template.neutral, D, self.target_neutral, self.template.faces,
@@ -149,9 +164,9 @@ class DeformationTransfer:
     def transfer(self, names=None) -> Rig:
         """Transfer every template shape (or those named) onto the target neutral."""
         idx = np.arange(self.template.n_shapes) if names is None else self.template.index(list(names))
-        if self.poisson.extra_rows is not None and self.virtual_edges is None:
-            raise InputError("transfer(): this transfer was built with extra rows; pass their targets to "
-                             "solve_frame_deltas(..., extra_cols=...)")
+        if self.poisson.extra_operator is not None and self.virtual_edges is None:
+            raise InputError("transfer(): this transfer was built with an extra operator; pass its targets to "
+                             "solve_frame_deltas(..., extra_targets=...)")
         D = self.template.deltas[idx]
         dA = frames_cm(self.template.neutral + D, self.template.faces)  # A_i^S - A_0^S, once for both uses
         dA -= self.template_frames

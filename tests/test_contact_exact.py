@@ -185,3 +185,37 @@ def test_cli_transfer_with_contact(tmp_path, capsys):
     assert main(base + ["--out", str(tmp_path / "x"), "--contact", "--contact-exclude", "pull"]) == 2
     assert "--contact-exclude: unknown blendshape names ['pull']" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_rig_cli_contact_generated_shapes_have_no_new_pairs(tmp_path, capsys):
+    """``rig --contact``: every generated shape is checked exactly against the target neutral and the
+    template shape; flags are validated before any work."""
+    from conftest import write_rig_inputs
+    from facebasis.cli import main
+    from facebasis.geometry.rig import load_rig_folder
+    from facebasis.rigging.synthetic import default_face_problem
+
+    pp = default_face_problem(seed=0, n_train=6)
+    root = write_rig_inputs(tmp_path, pp)
+    base = ["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"), "--examples",
+            str(root / "examples"), "--weights", str(root / "weights.json"), "--iterations", "2"]
+    assert main(base + ["--out", str(tmp_path / "x"), "--contact-exclude", "jawOpen"]) == 2
+    assert "expected --contact as well" in capsys.readouterr().err
+    assert main(base + ["--out", str(tmp_path / "y"), "--contact", "--contact-exclude", "noSuchShape"]) == 2
+    assert "noSuchShape" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    code = main(base + ["--out", str(tmp_path / "run"), "--contact"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "exact check: no generated shape" in out
+    template = load_rig_folder(root / "template")
+    gen = load_rig_folder(tmp_path / "run")
+    assert set(gen.names) == set(template.names)
+    for name, D in zip(gen.names, gen.deltas):
+        i = template.names.index(name)
+        rep = penetration_report(gen.neutral + D, template.faces,
+                                 references=(gen.neutral, template.neutral + template.deltas[i]))
+        assert len(rep.new) == 0, name
+    # the stored weights are the certified optimum for the corrected blendshapes actually written
+    assert main(["verify", str(tmp_path / "run")]) == 0
+    assert "certified optimal" in capsys.readouterr().out

@@ -114,15 +114,33 @@ def cmd_rig(args) -> int:
     from ..rigging.runs import write_rig_run
 
     if args.resume is not None:
+        if args.contact or args.contact_exclude:
+            raise InputError("--contact with --resume: expected a fresh run (contact is not stored in a run "
+                             "to resume), found --resume")
         return _cmd_rig_resume(args)
     absent = [f for f, v in (("--template", args.template), ("--target", args.target),
                              ("--examples", args.examples), ("--weights", args.weights)) if v is None]
     if absent:
         raise InputError(f"rig: expected {', '.join(absent)} (or --resume RUN_DIR), found none")
     # everything is validated before any solving starts
+    if not args.contact and args.contact_exclude:
+        raise InputError("--contact-exclude: expected --contact as well, found none")
     options = _rig_options(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
+    if args.contact_exclude:
+        template.index(args.contact_exclude, what="--contact-exclude")
+    if args.contact:
+        from ..contact.exact import MAX_VERTICES
+        from ..contact.proximity import new_pairs
+
+        if template.n_vertices > MAX_VERTICES:
+            raise InputError(f"--contact: expected a mesh of at most {MAX_VERTICES} vertices for the time budget, "
+                             f"found {template.n_vertices}")
+        bad = new_pairs(target, template.faces, (template.neutral,))
+        if len(bad):
+            raise InputError(f"--contact: expected a target neutral with no intersecting triangle pairs beyond the "
+                             f"template neutral's, found {len(bad)}; fix the mesh or generate without --contact")
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
     ve = virtual_edges_for(args, template)
@@ -151,13 +169,53 @@ def cmd_rig(args) -> int:
     if cv is not None:
         print(f"--alpha auto: {len(cv.grid)} candidates x {len(cv.fold_errors)} folds in {cv.seconds:.1f} s; "
               f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {min(cv.errors):.4f})")
+    contact = None
+    if args.contact:
+        contact, result = _contact_generation(gen, result, args.contact_exclude)
     sources = {"template": args.template, "neutral": args.neutral, "exclude": list(args.exclude),
                "target": args.target}
     with atomic_directory(args.out) as stage:
         write_rig_run(stage, result, options, problem, args.examples, args.weights, sources=sources)
     _warnings(result, options, list(names))
     print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
+    if contact is not None:
+        print(contact.table())
+        print(f"exact contact: {contact.seconds['total']:.2f} s")
+        if not contact.ok:
+            bad = [s.name for s in contact.shapes if not s.excluded and s.new_pairs_left]
+            print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
+                  f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
+            return 1
+        print("exact check: no generated shape has a triangle pair intersecting that does not intersect in the "
+              "target neutral or in the template shape" + (f" (excluded: {', '.join(args.contact_exclude)})"
+                                                           if args.contact_exclude else ""))
     return 0
+
+
+def _contact_generation(gen, result, exclude):
+    """Exact contact on the generated rig: each shape moved least in the generator's transfer energy
+    (virtual edges included) so that no new triangle pair intersects (see
+    :func:`facebasis.contact.exact.contact_correct`); the training residuals are recomputed."""
+    import dataclasses
+
+    import numpy as np
+
+    from ..contact.exact import contact_correct
+    from ..rigging.generation import relative_residuals
+
+    from ..rigging.weights import gram_data, solve_certified
+
+    contact = contact_correct(result.rig, gen.problem.template, transfer=gen.dt, exclude=exclude)
+    # the stored weights must be the certified optimum for the blendshapes actually written (so that
+    # `facebasis verify` certifies the run): one more eq. 5 step, at the run's final lambda
+    G, C, const = gram_data(contact.rig, gen.problem.examples)
+    final_lam = gen.options.schedule()[-1][1]
+    sol = solve_certified(G, C, const, gen.problem.initial_weights, final_lam, gen.pairs, free=gen.free)
+    residuals = relative_residuals(contact.rig, gen.problem.examples, sol.weights)
+    threshold = result.options.missing_threshold if result.options is not None else np.inf
+    missing = tuple(n for n, r in zip(result.example_names, residuals) if r > threshold)
+    return contact, dataclasses.replace(result, rig=contact.rig, weights=sol.weights, residuals=residuals,
+                                        missing=missing)
 
 
 def _cmd_rig_resume(args) -> int:
@@ -288,6 +346,12 @@ def register(sub) -> None:
                    help=f"alpha schedule FIRST,LAST (default {alpha}), or 'auto': chosen by k-fold cross-validation "
                         "over the training expressions (curve in crossval.json)")
     p.add_argument("--lambda", dest="lam", default=None, help=f"lambda schedule FIRST,LAST (default {lam})")
+    p.add_argument("--contact", action="store_true",
+                   help="exact contact: after generation, move each generated shape least (deformation-transfer "
+                        "energy) so that no triangle pair intersects that does not intersect in the target neutral "
+                        "or in the template shape; checked exactly (exit status 1 if a shape keeps a new pair)")
+    p.add_argument("--contact-exclude", action="extend", nargs="+", default=[], metavar="SHAPE",
+                   help="with --contact: shapes left as generated, e.g. correctives meant to press layers together")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")

@@ -29,6 +29,14 @@ The energy is ``||E d - t||^2`` per coordinate, so with ``x = d - d*`` its incre
    violates), repeat until there are none. The final check is complete: pairs away from R are the
    plain solution's, whose new pairs are all constrained.
 
+5. Optionally (``polish``, shapes corrected by more than ``POLISH_RATIO`` of their motion): the planes
+   of pairs apart by their margin are re-derived from the solution's closest points (any separating
+   plane keeps a pair apart; the target neutral's over-constrain under large rotations such as
+   blinks), the QP solved again and the result kept only if the exact check still finds no new pair.
+
+Shapes are corrected in parallel (forked processes, ``workers``). :func:`contact_correct` applies
+the same correction to shapes made otherwise (``facebasis rig --contact``: generated shapes).
+
 The plain solution's check is exhaustive without a full search: a pair of triangles that moved at
 most ``tau`` (per vertex) can only become intersecting if it is within ``2 tau`` in ``B0``; such
 near pairs of ``B0`` are listed once and always re-tested, every other pair holding a triangle that
@@ -58,14 +66,17 @@ from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
 from .proximity import candidate_pairs, intersecting, new_pairs, triangle_distance
 
-#: largest mesh (vertices) accepted by default: ICT's 14k vertices take ~10 s for 53 shapes
+#: largest mesh (vertices) accepted by default: ICT's 14k vertices take ~46 s CPU for 52 shapes (mouthClose excluded)
 MAX_VERTICES = 60_000
 #: default margin kept between constrained triangles, in median edge lengths of the target neutral
 MARGIN_EDGES = 0.05
 #: default radius of the region allowed to move around a contact, in median edge lengths
-REACH_EDGES = 4.0
+REACH_EDGES = 2.0
+#: planes are re-derived from the solution (see ContactSolver._polish) when the correction exceeds this
+#: fraction of the plain motion in the region that moves
+POLISH_RATIO = 0.1
 #: vertices moving less than this (median edge lengths) count as still in the plain solution's check
-STILL_EDGES = 5e-4
+STILL_EDGES = 0.1
 
 
 @dataclass(frozen=True)
@@ -179,13 +190,16 @@ class ContactSolver:
         at most half their distance in the target neutral
     reach : radius of the region allowed to move around contacts (default ``REACH_EDGES`` median edges)
     max_iterations : solve-and-check rounds per shape
+    polish : rounds re-deriving the separating planes from the solution (kept only if the exact check
+        still passes) for shapes corrected by more than ``POLISH_RATIO`` of their motion; 0 = off
     """
 
     def __init__(self, dt: DeformationTransfer, margin: float | None = None, reach: float | None = None,
-                 max_iterations: int = 40, solver: str = "admm"):
+                 max_iterations: int = 40, solver: str = "admm", polish: int = 3):
         if solver not in ("admm", "daqp"):
             raise InputError(f"contact solver: expected 'admm' or 'daqp', found {solver!r}")
         self.solver = solver
+        self.polish = int(polish)
         self.dt = dt
         self.F = dt.template.faces
         self.B0 = dt.target_neutral
@@ -327,12 +341,68 @@ class ContactSolver:
             found = left[~np.isin(left[:, 0] * len(F) + left[:, 1], code)]
             if len(left) == 0:  # the exact guarantee is met
                 break
+        if (self.polish and self.solver == "admm" and len(left) == 0 and x is not None and len(pairs)
+                and np.linalg.norm(x) > POLISH_RATIO * np.linalg.norm(d_plain[R])):
+            X, x, extra = self._polish(name, P, S, X, x, dual, pairs, normals, delta, active, C, R)
+            it += extra[0]
+            qp_iters += extra[1]
         d = d_plain.copy()
         if x is not None:
             d[R] += x
         dist, _ = triangle_distance(X[F[pairs[:, 0]]], X[F[pairs[:, 1]]])
         return d, ContactShape(name, False, plain_new, len(left), len(pairs), len(active), it, qp_iters, len(R),
                                float(dist.min()) if len(dist) else float("nan"), time.perf_counter() - t0)
+
+    def _admm_rows(self, P, pairs, normals, delta, active, C, R, x, dual):
+        """The separation QP over R's corrections for the given rows, by ADMM: x (|R|, 3), duals, iterations."""
+        F = self.F
+        p, ka, kb = active // 9, (active % 9) // 3, active % 3
+        va, vb = F[pairs[p, 0], ka], F[pairs[p, 1], kb]
+        nr = normals[p]
+        g = delta[p] - (nr * (P[va] - P[vb])).sum(1)
+        pa, pb = np.searchsorted(R, va), np.searchsorted(R, vb)
+        ok_a = (pa < len(R)) & (R[np.minimum(pa, len(R) - 1)] == va)
+        ok_b = (pb < len(R)) & (R[np.minimum(pb, len(R) - 1)] == vb)
+        c = len(active)
+        rows = np.arange(c)
+        AR = sp.hstack([sp.csr_matrix((np.concatenate([nr[ok_a, k], -nr[ok_b, k]]),
+                                       (np.concatenate([rows[ok_a], rows[ok_b]]),
+                                        np.concatenate([pa[ok_a], pb[ok_b]]))), shape=(c, len(R)))
+                        for k in range(3)]).tocsr()
+        xs = x.T.ravel().copy()
+        ys = np.zeros(c) if dual is None or len(dual) != c else dual
+        xs, dual, n_it = _admm(self.L[R][:, R], AR, g, delta[p], xs, ys)
+        return xs.reshape(3, len(R)).T, dual, n_it
+
+    def _polish(self, name, P, S, X, x, dual, pairs, normals, delta, active, C, R):
+        """Separating planes re-derived from the last solution: the planes of the target neutral
+        over-constrain under large rotations (blinks), while any plane that separates a pair keeps it
+        apart. For every constrained pair apart by at least its margin in X, the plane through X's
+        closest points replaces the old one; the QP is solved again and kept only if the exact check
+        still finds no new pair (otherwise X is kept). Returns X, x, (rounds, ADMM iterations)."""
+        F = self.F
+        rounds = qp = 0
+        touch = (self.vf.T @ np.isin(np.arange(self.n), R).astype(np.float64)) > 0
+        for _ in range(self.polish):
+            dist, nrm = triangle_distance(X[F[pairs[:, 0]]], X[F[pairs[:, 1]]])
+            ok = dist >= delta
+            if not ok.any():
+                break
+            normals2 = np.where(ok[:, None], nrm, normals)
+            vals = self._row_values(P, pairs, normals2, delta)
+            active2 = np.union1d(np.flatnonzero(vals.ravel() < -0.5 * np.repeat(delta, 9)), active)
+            x2, dual2, n_it = self._admm_rows(P, pairs, normals2, delta, active2, C, R, x, None)
+            rounds += 1
+            qp += n_it
+            X2 = P.copy()
+            X2[R] += x2
+            if len(new_pairs(X2, F, (self.B0, S), faces=touch)):
+                break
+            improved = (x2 * (self.L[R][:, R] @ x2)).sum() < (x * (self.L[R][:, R] @ x)).sum()
+            X, x, normals, active = X2, x2, normals2, active2
+            if not improved:
+                break
+        return X, x, (rounds, qp)
 
     def _row_values(self, X, pairs, normals, delta) -> np.ndarray:
         """``n . (X_a - X_b) - delta`` for the 3 x 3 corners of every constrained pair, (q, 9)."""
@@ -343,9 +413,54 @@ class ContactSolver:
         return (A[:, :, None] - B[:, None, :]).reshape(-1, 9) - delta[:, None]
 
 
+_SOLVER = None  # the solver a forked worker inherits
+
+
+def _correct_job(job):
+    return _SOLVER.correct(*job)
+
+
+def _available_cores() -> int:
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _correct_all(solver: "ContactSolver", jobs: list, workers: int | None) -> list:
+    """``solver.correct`` on every job, in order; in ``workers`` forked processes when more than one
+    (largest plain motion first, so that the slow shapes start early)."""
+    import multiprocessing as mp
+
+    workers = _available_cores() if workers is None else int(workers)
+    workers = max(1, min(workers, len(jobs)))
+    if workers == 1 or "fork" not in mp.get_all_start_methods():
+        return [solver.correct(*job) for job in jobs]
+    global _SOLVER
+    order = sorted(range(len(jobs)), key=lambda k: -float(np.abs(jobs[k][1]).sum()))
+    _SOLVER = solver
+    try:
+        pool = mp.get_context("fork").Pool(workers)
+        try:
+            done = pool.map(_correct_job, [jobs[k] for k in order], chunksize=1)
+            pool.close()
+        finally:
+            pool.terminate()
+            pool.join()
+    finally:
+        _SOLVER = None
+    out = [None] * len(jobs)
+    for k, r in zip(order, done):
+        out[k] = r
+    return out
+
+
 def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anchors=None, margin=None,
                      reach=None, allow_target_pairs: bool = False, max_vertices: int = MAX_VERTICES,
-                     max_iterations: int = 40, transfer: DeformationTransfer | None = None) -> ContactResult:
+                     max_iterations: int = 40, transfer: DeformationTransfer | None = None,
+                     workers: int | None = None) -> ContactResult:
     """Deformation transfer with exact contact: no triangle pair intersects in a transferred shape
     unless it intersects in the target neutral or in the template shape.
 
@@ -359,6 +474,8 @@ def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anch
     allow_target_pairs : accept a target neutral that intersects itself where the template neutral does
         not (its pairs stay allowed); by default that is an error
     max_vertices : refuse larger meshes (time budget)
+    workers : processes correcting shapes in parallel (default: the available cores; 1 = in this
+        process; needs the ``fork`` start method, otherwise 1)
 
     Returns
     -------
@@ -367,7 +484,7 @@ def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anch
     t_all = time.perf_counter()
     if template.n_vertices > max_vertices:
         raise InputError(f"contact: expected a mesh of at most {max_vertices} vertices for the time budget (ICT's "
-                         f"14062 took 132 s for 53 shapes, 61 s without mouthClose), found {template.n_vertices}; pass max_vertices= to "
+                         f"14062 take ~46 s CPU for 52 shapes without mouthClose, on all cores), found {template.n_vertices}; pass max_vertices= to "
                          "allow more, or transfer without contact")
     B0 = validate_vertices(target_neutral, "target neutral", template.n_vertices)
     names = list(template.names) if names is None else list(names)
@@ -395,19 +512,57 @@ def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anch
     seconds["contact setup"] = time.perf_counter() - t
     t = time.perf_counter()
     deltas = plain.deltas.copy()
-    reports = []
+    reports = [ContactShape(name, excluded=True) if name in exclude else None for name in names]
     idx = template.index(names)
-    for k, (name, i) in enumerate(zip(names, idx)):
-        if name in exclude:
-            reports.append(ContactShape(name, excluded=True))
-            continue
-        deltas[k], rep = solver.correct(name, plain.deltas[k], template.deltas[i])
-        reports.append(rep)
+    todo = [k for k, name in enumerate(names) if name not in exclude]
+    jobs = [(names[k], plain.deltas[k], template.deltas[idx[k]]) for k in todo]
+    for k, (d, rep) in zip(todo, _correct_all(solver, jobs, workers)):
+        deltas[k] = d
+        reports[k] = rep
     seconds["shapes"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t_all
+    seconds["workers"] = max(1, min(_available_cores() if workers is None else int(workers), len(todo)))
     rig = Rig(B0, template.faces, tuple(names), deltas, source="deformation transfer, exact contact")
     return ContactResult(rig, plain, tuple(reports), seconds)
 
 
-__all__ = ["ContactShape", "ContactResult", "ContactSolver", "contact_transfer", "MAX_VERTICES", "MARGIN_EDGES",
+def contact_correct(rig: Rig, template: Rig, transfer: DeformationTransfer | None = None, exclude=(),
+                    margin=None, reach=None, max_iterations: int = 40, workers: int | None = None) -> ContactResult:
+    """Exact contact for shapes made otherwise (e.g. example-based generation) on the target neutral
+    ``rig.neutral``: each shape of ``rig`` (named as in ``template``) is moved, least in the
+    deformation-transfer energy of ``transfer`` (default a plain one onto ``rig.neutral``), so that no
+    triangle pair intersects unless it intersects in ``rig.neutral`` or in the template's shape of
+    the same name. ``result.plain`` is ``rig`` itself."""
+    B0 = validate_vertices(rig.neutral, "target neutral", template.n_vertices)
+    names = list(rig.names)
+    idx = template.index(names)
+    exclude = [exclude] if isinstance(exclude, str) else list(exclude)
+    unknown = [e for e in exclude if e not in names]
+    if unknown:
+        raise InputError(f"contact exclude: expected shape names of the rig, found unknown "
+                         f"{', '.join(repr(u) for u in unknown)}")
+    t_all = time.perf_counter()
+    dt = DeformationTransfer(template, B0) if transfer is None else transfer
+    if not np.allclose(dt.target_neutral, B0):
+        raise InputError("contact: expected the transfer's target neutral to be the rig's neutral")
+    seconds = {}
+    t = time.perf_counter()
+    solver = ContactSolver(dt, margin, reach, max_iterations)
+    seconds["contact setup"] = time.perf_counter() - t
+    t = time.perf_counter()
+    deltas = np.array(rig.deltas, dtype=np.float64, copy=True)
+    reports = [ContactShape(name, excluded=True) if name in exclude else None for name in names]
+    todo = [k for k, name in enumerate(names) if name not in exclude]
+    jobs = [(names[k], deltas[k].copy(), template.deltas[idx[k]]) for k in todo]
+    for k, (d, rep) in zip(todo, _correct_all(solver, jobs, workers)):
+        deltas[k] = d
+        reports[k] = rep
+    seconds["shapes"] = time.perf_counter() - t
+    seconds["total"] = time.perf_counter() - t_all
+    out = Rig(B0, template.faces, tuple(names), deltas, source=f"{rig.source}, exact contact" if getattr(rig, "source", None)
+              else "exact contact")
+    return ContactResult(out, rig, tuple(reports), seconds)
+
+
+__all__ = ["ContactShape", "ContactResult", "ContactSolver", "contact_transfer", "contact_correct", "MAX_VERTICES", "MARGIN_EDGES",
            "REACH_EDGES"]

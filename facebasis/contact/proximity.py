@@ -61,9 +61,9 @@ def candidate_pairs(V: np.ndarray, F: np.ndarray, faces=None, pad: float = 0.0) 
         return np.zeros((0, 2), np.int64)
     c, r = _balls(V, F)
     r = r + 0.5 * float(pad)
-    levels = [(idx, R, cKDTree(c[idx])) for idx, R in _levels(r)]
     P = []
     if faces is None:
+        levels = [(idx, R, cKDTree(c[idx])) for idx, R in _levels(r)]
         for a, (ia, ra, ta) in enumerate(levels):
             P.append(ia[ta.query_pairs(2.0 * ra, output_type="ndarray")].reshape(-1, 2))
             for ib, rb, tb in levels[a + 1:]:
@@ -72,6 +72,14 @@ def candidate_pairs(V: np.ndarray, F: np.ndarray, faces=None, pad: float = 0.0) 
     else:
         faces = np.asarray(faces)
         sel = faces.astype(bool) if faces.dtype == bool else np.isin(np.arange(m), faces)
+        if not sel.any():
+            return np.zeros((0, 2), np.int64)
+        # only triangles whose balls can reach the selected ones' box are searched (exact: ball distance)
+        lo_s = (c[sel] - r[sel, None]).min(0) - r.max()
+        hi_s = (c[sel] + r[sel, None]).max(0) + r.max()
+        keep = ((c >= lo_s) & (c <= hi_s)).all(1)
+        levels = [(idx[keep[idx]], R) for idx, R in _levels(r)]
+        levels = [(idx, R, cKDTree(c[idx])) for idx, R in levels if len(idx)]
         for ia, ra, _ in levels:
             qa = ia[sel[ia]]
             if len(qa) == 0:

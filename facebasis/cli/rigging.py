@@ -41,14 +41,7 @@ def cmd_transfer(args) -> int:
     print(f"transferred {result.n_shapes} shapes onto {args.target} in {seconds:.3f} s -> {args.out}")
     if contact is not None:
         print(contact.table())
-        if not contact.ok:
-            bad = [s.name for s in contact.shapes if not s.excluded and s.new_pairs_left]
-            print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
-                  f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
-            return 1
-        print("exact check: no transferred shape has a triangle pair intersecting that does not intersect in the "
-              "target neutral or in the template shape" + (f" (excluded: {', '.join(args.contact_exclude)})"
-                                                           if args.contact_exclude else ""))
+        return _contact_verdict(contact, "transferred", args.contact_exclude)
     return 0
 
 
@@ -181,14 +174,19 @@ def cmd_rig(args) -> int:
     if contact is not None:
         print(contact.table())
         print(f"exact contact: {contact.seconds['total']:.2f} s")
-        if not contact.ok:
-            bad = [s.name for s in contact.shapes if not s.excluded and s.new_pairs_left]
-            print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
-                  f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
-            return 1
-        print("exact check: no generated shape has a triangle pair intersecting that does not intersect in the "
-              "target neutral or in the template shape" + (f" (excluded: {', '.join(args.contact_exclude)})"
-                                                           if args.contact_exclude else ""))
+        return _contact_verdict(contact, "generated", args.contact_exclude)
+    return 0
+
+
+def _contact_verdict(contact, what: str, excluded) -> int:
+    """Say what the exact check found after the contact solve; 1 if a shape keeps a new pair."""
+    if not contact.ok:
+        bad = [s.name for s in contact.shapes if not s.excluded and s.new_pairs_left]
+        print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
+              f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
+        return 1
+    print(f"exact check: no {what} shape has a triangle pair intersecting that does not intersect in the "
+          "target neutral or in the template shape" + (f" (excluded: {', '.join(excluded)})" if excluded else ""))
     return 0
 
 

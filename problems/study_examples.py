@@ -1,20 +1,25 @@
 """Study: held-out error against the number of training expressions (ICT person problems).
 
-``python -m problems.study_examples [--m 10 20 40 80 160] [--seeds 0 1 2] [--out reports/examples_study]``
+``python -m problems.study_examples [--m 10 20 40 80 160] [--seeds 0 1 2] [--out reports/examples_study]
+[--grid A ...] [--redo]``
 
 For every (m, seed): template deltas, deformation transfer, example-based generation with the
 paper's schedule (unobserved shapes fitted, the paper; and kept at their transfer, the default),
 ``alpha="auto"`` (k-fold cross-validation), and the oracle (true weights held fixed). Scores:
 held-out relative error with refitted weights (certified; bounds + complementarity, no prior),
 the per-shape error of the shapes no training expression activates, and their weight error.
-Rows are appended to ``rows.json`` as they finish (a rerun skips rows already there); the figure
-``heldout_vs_m.png`` and ``summary.md`` are redrawn from all rows.
+Rows are merged into ``rows.json`` as every (m, seed) case finishes, under a file lock and written
+atomically, so an interrupted run loses at most the case under way and several processes (e.g. one
+per seed) may share one output folder; a rerun skips cases already there (``--redo`` recomputes
+them). The figure ``heldout_vs_m.png`` and ``summary.md`` are redrawn from all rows.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import fcntl
 import json
 import os
 import sys
@@ -27,7 +32,7 @@ METHODS = ("template deltas", "deformation transfer", "paper (unobserved fitted)
            "alpha auto", "oracle (true weights)")
 
 
-def run_case(m: int, seed: int) -> list[dict]:
+def run_case(m: int, seed: int, grid: tuple[float, ...] = ()) -> list[dict]:
     from facebasis.geometry.transfer import deformation_transfer
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
@@ -46,7 +51,8 @@ def run_case(m: int, seed: int) -> list[dict]:
                "seen_shape_error": float(np.delete(d, unseen).mean()),
                "unseen_weight_error": (float(np.abs(weights[:, unseen]).mean()) if weights is not None and len(unseen)
                                        else None),
-               "initial_unseen_weight_error": float(np.abs(p.initial_weights[:, unseen]).mean()) if len(unseen) else None}
+               "initial_unseen_weight_error": float(np.abs(p.initial_weights[:, unseen]).mean()) if len(unseen) else None,
+               "load_average": os.getloadavg()[0]}
         row.update(extra or {})
         rows.append(row)
         print(f"  m {m:3d} seed {seed} {name:28s} held-out {err:.4f}  unseen shapes {len(unseen):2d} "
@@ -67,7 +73,7 @@ def run_case(m: int, seed: int) -> list[dict]:
     score("paper (unobserved fitted)", res.rig, s, c, res.weights)
     res, s, c = timed(lambda: BlendshapeGenerator(p, base).run())
     score("paper (unobserved kept)", res.rig, s, c, res.weights, {"unobserved": list(res.unobserved)})
-    res, s, c = timed(lambda: BlendshapeGenerator(p, dataclasses.replace(base, alpha="auto")).run())
+    res, s, c = timed(lambda: BlendshapeGenerator(p, dataclasses.replace(base, alpha="auto", cv_grid=grid)).run())
     cv = res.crossval
     score("alpha auto", res.rig, s, c, res.weights,
           {"best_alpha": cv.best_alpha, "cv_seconds": cv.seconds, "cv_cpu_seconds": cv.cpu_seconds,
@@ -75,6 +81,35 @@ def run_case(m: int, seed: int) -> list[dict]:
     oracle = dataclasses.replace(p, initial_weights=pp.true_weights)
     res, s, c = timed(lambda: BlendshapeGenerator(oracle, dataclasses.replace(base, lam=(1e8, 1e8))).run())
     score("oracle (true weights)", res.rig, s, c, res.weights)
+    return rows
+
+
+@contextlib.contextmanager
+def _locked(out: Path):
+    fd = os.open(out, os.O_RDONLY)  # lock the folder itself: no lock file left behind
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def load_rows(out: Path) -> list[dict]:
+    path = out / "rows.json"
+    return json.loads(path.read_text()) if path.is_file() else []
+
+
+def merge_rows(out: Path, new: list[dict]) -> list[dict]:
+    """Merge ``new`` (whole cases) into ``out/rows.json`` under the lock (the case's old rows
+    replaced), write it atomically, and return all rows."""
+    from facebasis.atomic import atomic_write_bytes
+
+    cases = {(r["m"], r["seed"]) for r in new}
+    with _locked(out):
+        rows = [r for r in load_rows(out) if (r["m"], r["seed"]) not in cases] + list(new)
+        rows.sort(key=lambda r: (r["m"], r["seed"], METHODS.index(r["method"])))
+        atomic_write_bytes(out / "rows.json", json.dumps(rows, indent=1).encode())
+        summarise(rows, out)
     return rows
 
 
@@ -106,9 +141,12 @@ def summarise(rows, out: Path) -> None:
             a, d, t = get["alpha auto"]["heldout"], get["deformation transfer"]["heldout"], get["template deltas"]["heldout"]
             lines.append(f"- m = {m}, seed {seed}: auto/DT = {a / d:.3f}, auto <= min(DT, template) "
                          f"{'yes' if a <= min(d, t) else 'NO'}; chosen alpha {get['alpha auto']['best_alpha']:g}; "
+                         f"(grid {min(get['alpha auto']['cv_grid']):g} .. {max(get['alpha auto']['cv_grid']):g}); "
                          f"cross-validation {get['alpha auto']['cv_seconds']:.1f} s wall, "
                          f"{get['alpha auto']['cv_cpu_seconds']:.1f} s CPU; paper run "
-                         f"{get['paper (unobserved kept)']['seconds']:.1f} s")
+                         f"{get['paper (unobserved kept)']['seconds']:.1f} s"
+                         + (f" (load average {get['alpha auto']['load_average']:.1f})"
+                            if "load_average" in get["alpha auto"] else ""))
     lines += ["", "Shapes no training expression activates (mean per-shape error vs the truth; mean |weight| of "
               "those shapes in the training expressions, whose truth is 0):", ""]
     for m in ms:
@@ -124,17 +162,31 @@ def summarise(rows, out: Path) -> None:
                             if we else ""))
     (out / "summary.md").write_text("\n".join(lines) + "\n")
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.5, 3.4))
+    fig, ax = plt.subplots(figsize=(7.2, 3.6))
     for meth, style in zip(METHODS, ("s--", "o--", "v-", "^-", "D-", "x:")):
         xs = [m for m in ms if (meth, m) in table]
-        ys = [np.mean([r["heldout"] for r in table[(meth, m)]]) for m in xs]
-        ax.plot(xs, ys, style, label=meth)
+        vals = [[r["heldout"] for r in table[(meth, m)]] for m in xs]
+        ys = np.array([np.mean(v) for v in vals])
+        lo, hi = ys - [min(v) for v in vals], [max(v) for v in vals] - ys
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt=style, capsize=2, ms=4, lw=1, label=meth)
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
-    ax.set_xticks(ms, [str(m) for m in ms])
-    ax.set_xlabel("training expressions m")
-    ax.set_ylabel("held-out relative error")
-    ax.legend(fontsize=7)
+    ax.set_xticks(ms, [f"{m}\n({len({r['seed'] for r in rows if r['m'] == m})} seed"
+                       f"{'s' if len({r['seed'] for r in rows if r['m'] == m}) > 1 else ''})" for m in ms])
+    from matplotlib.ticker import FormatStrFormatter, NullLocator
+
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FormatStrFormatter("%.2f"))
+    ax.yaxis.set_minor_formatter(FormatStrFormatter("%.2f"))
+    ax.tick_params(axis="y", which="minor", labelsize=7)
+    ax.set_xlabel("training expressions m (log scale)")
+    ax.set_ylabel("held-out relative error\n||B0 + Bx - T|| / ||T - B0|| (log)")
+    seeds = sorted({r["seed"] for r in rows})
+    ax.set_title(f"ICT person problems, seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}: mean"
+                 + (", bars min..max over the seeds" if len(seeds) > 1 else ""), fontsize=8)
+    # legend outside the axes: never over the data
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
     save(fig, out / "heldout_vs_m", ("png",))
 
 
@@ -143,6 +195,9 @@ def main(argv=None) -> int:
     ap.add_argument("--m", type=int, nargs="+", default=[10, 20, 40, 80, 160])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--out", default="reports/examples_study")
+    ap.add_argument("--grid", type=float, nargs="+", default=[],
+                    help="candidate final alphas of alpha auto (default: the library's default grid)")
+    ap.add_argument("--redo", action="store_true", help="recompute cases already in rows.json")
     args = ap.parse_args(argv)
     from problems.ict import ict_available, ict_path
 
@@ -151,18 +206,15 @@ def main(argv=None) -> int:
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "rows.json"
-    rows = json.loads(path.read_text()) if path.is_file() else []
-    done = {(r["m"], r["seed"]) for r in rows if r["method"] == METHODS[-1]}
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     for m in args.m:
         for seed in args.seeds:
-            if (m, seed) in done:
+            done = {(r["m"], r["seed"]) for r in load_rows(out) if r["method"] == METHODS[-1]}
+            if (m, seed) in done and not args.redo:
                 continue
-            rows += run_case(m, seed)
-            path.write_text(json.dumps(rows, indent=1))
-            summarise(rows, out)
-    summarise(rows, out)
+            merge_rows(out, run_case(m, seed, tuple(args.grid)))
+    with _locked(out):
+        summarise(load_rows(out), out)
     return 0
 
 

@@ -25,4 +25,4 @@ for a in grid:
     hs[a]=heldout_error(r.rig,pp.heldout,p.pair_indices); print(a,hs[a],flush=True)
 out["heldout_fixed"]=hs
 print(json.dumps(out,indent=1))
-json.dump(out,open(os.path.join(os.path.dirname(__file__), f"grid_edge_m{m}_seed{seed}.json"),"w"),indent=1)
+json.dump(out, open(os.path.join(os.path.dirname(__file__), "..", "reports", "examples_study", f"grid_edge_m{m}_seed{seed}.json"), "w"), indent=1)

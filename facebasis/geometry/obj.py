@@ -107,8 +107,10 @@ def _count_tokens(buf: np.ndarray, n_lines: int) -> np.ndarray:
     ws = (buf == _SP) | (buf == _TAB) | (buf == _NL)
     start = ~ws
     start[1:] &= ws[:-1]
-    line = np.searchsorted(np.flatnonzero(buf == _NL), np.flatnonzero(start))
-    return np.bincount(line, minlength=n_lines)[:n_lines]
+    if n_lines == 0:
+        return np.zeros(0, np.int64)
+    line_starts = np.r_[0, np.flatnonzero(buf == _NL)[:-1] + 1]  # every line ends in a newline
+    return np.add.reduceat(start.view(np.uint8), line_starts, dtype=np.int64)
 
 
 def _read_plain(raw: bytes, name: str):
@@ -129,7 +131,7 @@ def _read_plain(raw: bytes, name: str):
     out = []
     for k in (_V, _F):
         lines = np.flatnonzero(kind == k)
-        buf = data[byte_kind == k].copy()
+        buf = data[byte_kind == k]  # boolean indexing copies
         if len(lines):
             buf[np.r_[0, np.cumsum(nl[lines] - starts[lines] + 1)[:-1]]] = _SP  # the keyword
         text = buf.tobytes()

@@ -11,6 +11,7 @@ from facebasis.errors import InputError, MeshError
 from facebasis.geometry.nricp import closest_point_on_triangles
 from facebasis.geometry.registration import Registration, register_files, register_scan
 from facebasis.geometry.rigid import Similarity
+from problems.bench_registration import random_rotation
 
 
 def icosphere(subdiv: int = 3):
@@ -36,15 +37,6 @@ def bumpy(V):
     return V * r[:, None]
 
 
-def rotation(rng):
-    q = rng.standard_normal(4)
-    q /= np.linalg.norm(q)
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def test_closest_point_on_triangles_matches_brute_force():
     rng = np.random.default_rng(0)
     A, B, C = (rng.standard_normal((500, 3)) for _ in range(3))
@@ -64,7 +56,7 @@ def test_rigid_motion_of_itself_returns_itself():
     V, F = icosphere(3)
     V = bumpy(V)
     rng = np.random.default_rng(1)
-    sim = Similarity(1.3, rotation(rng), rng.uniform(-2, 2, 3))
+    sim = Similarity(1.3, random_rotation(rng), rng.uniform(-2, 2, 3))
     S = sim.apply(V)
     perm = rng.permutation(len(S))
     inv = np.argsort(perm)
@@ -85,7 +77,7 @@ def test_remeshed_sphere_registers_onto_the_surface():
     V, F = icosphere(3)
     S, G = uv_sphere((48, 48))
     rng = np.random.default_rng(2)
-    sim = Similarity(2.0, rotation(rng), np.array([5.0, -1.0, 3.0]))
+    sim = Similarity(2.0, random_rotation(rng), np.array([5.0, -1.0, 3.0]))
     res = register_scan(bumpy(V), F, sim.apply(bumpy(S)), G)
     # distance to the true smooth surface, measured in the template frame
     back = sim.inverse().apply(res.vertices)
@@ -135,7 +127,7 @@ def test_landmarks_give_the_pose_and_are_reported():
     V, F = icosphere(3)
     V = bumpy(V)
     rng = np.random.default_rng(4)
-    sim = Similarity(1.0, rotation(rng), np.array([0.5, 0.0, 0.0]))
+    sim = Similarity(1.0, random_rotation(rng), np.array([0.5, 0.0, 0.0]))
     lm = np.array([0, 50, 100, 200, 400, 600])
     res = register_scan(V, F, sim.apply(V), F, template_landmarks=lm, scan_landmarks=sim.apply(V[lm]))
     assert res.landmark_error is not None and res.landmark_error.max() < 5e-3
@@ -199,7 +191,7 @@ def test_cli_end_to_end_on_a_folder(tmp_path, capsys):
     T = bumpy(V)
     S, G = uv_sphere((30, 30))
     rng = np.random.default_rng(5)
-    sim = Similarity(1.0, rotation(rng), np.array([1.0, 2.0, 0.0]))
+    sim = Similarity(1.0, random_rotation(rng), np.array([1.0, 2.0, 0.0]))
     scans = tmp_path / "scans"
     scans.mkdir()
     _write_obj(scans / "neutral.obj", sim.apply(bumpy(S)), G)

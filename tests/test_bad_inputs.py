@@ -40,7 +40,7 @@ CASES = [
     ("rig {rig} --exclusive jawOpen:jawOpen", "expected two different shapes, found one twice"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/nope --weights {d}/weights.json --out {o}", "expected a folder of meshes, found no such folder"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/nope.json --out {o}", "expected a weights JSON file, found no such file"),
-    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/notjson.json --out {o}", "expected valid JSON"),
+    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/notjson.json --out {o}", "expected a weights JSON file, found invalid JSON"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/list.json --out {o}", "expected a JSON object {example: {shape: weight}}, found list"),
     # verify and export
     ("verify {d}/template", "expected inputs.json (written by `facebasis rig`), found no such file"),

@@ -86,7 +86,7 @@ def test_rig_cli_other_errors(rig_inputs, tmp_path, capsys):
     assert "--alpha: expected two numbers FIRST,LAST, found 'big'" in capsys.readouterr().err
     (tmp_path / "bad.json").write_text("{not json")
     assert main(args(root, **{"--out": tmp_path / "o", "--weights": tmp_path / "bad.json"})) == 2
-    assert "bad.json: expected valid JSON, found a parse error" in capsys.readouterr().err
+    assert "bad.json: expected a weights JSON file, found invalid JSON" in capsys.readouterr().err
     ex = tmp_path / "ex"
     ex.mkdir()
     V = default_template().neutral

@@ -47,7 +47,6 @@ References
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +55,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InputError
+from ..jsonio import read_json
 from ..geometry.mesh import median_edge_length, validate_mesh
 from .geodesics import geodesic_pair_distances
 
@@ -135,8 +135,8 @@ class VirtualEdges:
     def read(path, n_vertices: int | None = None) -> VirtualEdges:
         """Read an EDGES.json; checks the vertex count against ``n_vertices`` if given."""
         path = Path(path)
+        d = read_json(path, "a virtual-edges JSON file")
         try:
-            d = json.loads(path.read_text())
             E = np.asarray(d["edges"], dtype=np.int64).reshape(-1, 2)
             n = int(d["n_vertices"])
             ve = VirtualEdges(E, np.asarray(d.get("euclidean", [np.nan] * len(E)), float),
@@ -144,9 +144,7 @@ class VirtualEdges:
                               n, float(d.get("cap", np.nan)), float(d.get("ratio", np.nan)),
                               int(d.get("per_vertex", 0)), float(d.get("spacing", np.nan)),
                               int(d.get("candidates", 0)), float(d.get("seconds", 0.0)), source=str(path))
-        except FileNotFoundError as exc:
-            raise InputError(f"{path}: expected a virtual-edges JSON file, found no such file") from exc
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"{path}: expected a virtual-edges JSON with 'n_vertices' and 'edges' [[u, v], ...], "
                              f"found an unreadable file ({exc})") from exc
         if n_vertices is not None and n != n_vertices:

@@ -20,7 +20,6 @@ CVPR 2007.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, MeshError
+from ..jsonio import read_json
 from .mesh import median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
@@ -147,12 +147,7 @@ def read_landmarks(path: str | os.PathLike):
     """Read a landmark JSON file: a list of vertex indices or of [x, y, z] points, or an object
     ``{"landmarks": [...]}``, or (scan landmarks of a folder) an object mapping scan stems to lists."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"landmarks {path}: expected a JSON file, found no such file")
-    try:
-        data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"landmarks {path}: expected JSON, found unreadable text ({exc})") from exc
+    data = read_json(path, "a JSON list of vertex indices or [x, y, z] points", what="landmarks")
     if isinstance(data, dict) and "landmarks" in data:
         data = data["landmarks"]
     if isinstance(data, dict):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..jsonio import read_json
 
 
 def read_indices(path) -> np.ndarray:
@@ -17,12 +18,7 @@ def read_indices(path) -> np.ndarray:
     (:func:`facebasis.retarget.rigdrive.check_landmark_indices`).
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"landmark index file {path}: expected a JSON list of vertex indices, found no such file")
-    try:
-        data = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise InputError(f"landmark index file {path}: expected JSON, found unreadable text ({exc})") from exc
+    data = read_json(path, "a JSON list of vertex indices", what="landmark index file")
     if isinstance(data, dict):
         data = data.get("indices", data.get("landmarks"))
     if not isinstance(data, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in data):

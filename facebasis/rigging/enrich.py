@@ -24,7 +24,6 @@ References
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..jsonio import read_json
 from ..geometry.rig import Rig
 from .generation import (BlendshapeGenerator, GenerationOptions, GenerationProblem, GenerationResult,
                          relative_residuals)
@@ -60,8 +60,8 @@ def _options_from_history(run: Path) -> GenerationOptions:
     if not path.is_file():
         raise InputError(f"--resume {run}: expected history.json (written by `facebasis rig`), found no such file")
     try:
-        opts = json.loads(path.read_text())["options"]
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        opts = read_json(path, "the run's history (JSON)")["options"]
+    except (KeyError, TypeError) as exc:
         raise InputError(f"{path}: expected the run's options under 'options', found an unreadable file ({exc})") from exc
     known = {f.name for f in dataclasses.fields(GenerationOptions)}
     kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in opts.items() if k in known}

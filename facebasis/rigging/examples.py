@@ -6,13 +6,13 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, RigError
+from ..jsonio import read_json
 from ..geometry.meshio import MESH_SUFFIXES, read_mesh_like
 from ..geometry.rig import Rig
 
@@ -67,12 +67,7 @@ def parse_weights(obj, example_names, shape_names, source: str = "weights") -> n
 
 def load_weights(path: str | os.PathLike, example_names, shape_names) -> np.ndarray:
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: expected a weights JSON file, found no such file")
-    try:
-        obj = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: expected valid JSON, found a parse error ({exc})") from exc
+    obj = read_json(path, "a weights JSON file")
     return parse_weights(obj, example_names, shape_names, str(path))
 
 

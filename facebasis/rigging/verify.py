@@ -21,7 +21,6 @@ References
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ import numpy as np
 from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation, weight_objective
 from .weights import gram_data
 from ..errors import InputError
+from ..jsonio import read_json
 
 INPUTS_FILE = "inputs.json"
 
@@ -117,13 +117,13 @@ def read_inputs(run_dir):
     if not path.is_file():
         raise InputError(f"{run}: expected {INPUTS_FILE} (written by `facebasis rig`), found no such file")
     try:
-        inputs = json.loads(path.read_text())
+        inputs = read_json(path, "keys examples, weights, exclusive, final_lambda (the run's inputs as JSON)")
         ex, wf = inputs["examples"], inputs["weights"]
         inputs["exclusive"], inputs["final_lambda"] = inputs["exclusive"], float(inputs["final_lambda"])
         ex, wf = ([ex] if isinstance(ex, str) else list(ex)), ([wf] if isinstance(wf, str) else list(wf))
         if len(ex) != len(wf):
             raise ValueError(f"{len(ex)} example folders, {len(wf)} weight files")
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{path}: expected keys examples, weights, exclusive, final_lambda, found an unreadable "
                          f"file ({exc})") from exc
 

@@ -15,7 +15,9 @@ Modules
 rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
 warp2d     vectorised piecewise-affine warp of a cartoon image (:class:`CartoonAnimator`)
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
-rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`), identifiability
+rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
+pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
+observe    which shapes the landmarks can tell apart (:func:`identifiability`)
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
 

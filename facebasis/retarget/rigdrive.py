@@ -10,7 +10,7 @@ rig's +y is the image's up; image y grows downwards). Per frame, in order, warm-
 previous frame, pose and weights are alternated:
 
 * pose | x: Gauss-Newton on (log s, rotation increment, t), closed-form start on frame 0 (affine
-  camera fit, orthonormalised by SVD);
+  camera fit, orthonormalised by SVD), both in :mod:`.pose` (re-exported here);
 * the weight step sees the data with the pose's 6 linearised directions projected out (variable
   projection), so one round per warm-started frame is enough (about 12 rounds without it);
 * x | pose: the package's weight model (seed 000, eq. 5, with the data term of the model above)
@@ -53,9 +53,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.rig import Rig
+from .observe import Identifiability, identifiability, landmark_jacobian
+from .pose import (PI, fit_pose_affine, fit_pose_gn, pose_jacobian, project_landmarks, rotation_from_vector,
+                   rotation_to_vector)
 
-#: the rig's +y up becomes the image's -y (down)
-PI = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 #: default temporal smoothness mu (rig units^2 per unit weight^2)
 DEFAULT_SMOOTH = 0.05
 #: default ridge rho towards the neutral: set from the capture's landmark noise (see :func:`auto_ridge`)
@@ -80,89 +81,6 @@ def auto_ridge(noise_rig: float, prior_std: float = PRIOR_STD, floor: float = RI
         return float(floor)
     return float(max(floor, (noise_rig / prior_std) ** 2))
 
-
-def rotation_from_vector(w) -> np.ndarray:
-    """Rodrigues: rotation vector (3,) -> (3, 3)."""
-    w = np.asarray(w, np.float64)
-    th = float(np.linalg.norm(w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + np.sin(th) / th * K + (1.0 - np.cos(th)) / th ** 2 * (K @ K)
-
-
-def rotation_to_vector(R) -> np.ndarray:
-    """Inverse Rodrigues: (3, 3) -> rotation vector (3,) (angle in radians times the axis)."""
-    R = np.asarray(R, np.float64)
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    th = np.arccos(c)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if th < 1e-8:
-        return v / 2.0
-    if np.pi - th < 1e-6:
-        w, V = np.linalg.eigh((R + R.T) / 2.0)
-        return V[:, -1] * th
-    return v * th / (2.0 * np.sin(th))
-
-
-def project_landmarks(points, scale, rotation, translation) -> np.ndarray:
-    """Weak perspective ``s Pi R q + t`` of points (..., L, 3) -> (..., L, 2); scale (...,),
-    rotation (..., 3, 3), translation (..., 2)."""
-    q = np.asarray(points, np.float64)
-    R = np.asarray(rotation, np.float64)
-    s = np.asarray(scale, np.float64)
-    u = np.einsum("...ij,...lj->...li", PI @ R, q)
-    return s[..., None, None] * u + np.asarray(translation, np.float64)[..., None, :]
-
-
-def fit_pose_affine(q, p) -> tuple[float, np.ndarray, np.ndarray]:
-    """Closed-form weak-perspective pose of 3D points q (L, 3) seen at p (L, 2): least-squares affine
-    camera, rows orthonormalised by SVD. Returns (s, R (3, 3), t (2,))."""
-    qc, pc = q - q.mean(0), p - p.mean(0)
-    M, *_ = np.linalg.lstsq(qc, pc, rcond=None)          # p ~= q M: M (3, 2)
-    M = M.T                                              # (2, 3) ~= s Pi R
-    U, S, Vt = np.linalg.svd(M, full_matrices=False)
-    rows = U @ Vt                                        # nearest matrix with orthonormal rows
-    s = float(S.mean())
-    r1, r2 = rows[0], -rows[1]                           # undo Pi
-    R = np.stack([r1, r2, np.cross(r1, r2)])
-    t = p.mean(0) - s * (PI @ R @ q.mean(0))
-    return s, R, t
-
-
-def fit_pose_gn(q, p, s, R, t, iterations: int = 4) -> tuple[float, np.ndarray, np.ndarray, float]:
-    """Gauss-Newton on (log s, rotation increment w (R <- exp(w) R), t) for ``s Pi R q + t ~= p``.
-
-    q : (L, 3); p : (L, 2). Returns (s, R, t, rms residual in pixels).
-    """
-    for _ in range(iterations):
-        u = q @ R.T                                      # (L, 3) rotated points
-        r = (s * (u @ PI.T) + t - p).reshape(-1)         # (2L,)
-        J = _pose_jacobian(u) * np.array([s, s, s, s, 1.0, 1.0])
-        H = J.T @ J
-        H[np.diag_indices(6)] *= 1.0 + 1e-9
-        step = -np.linalg.solve(H + 1e-12 * np.eye(6), J.T @ r)
-        s = s * float(np.exp(np.clip(step[0], -0.5, 0.5)))
-        R = rotation_from_vector(step[1:4]) @ R
-        t = t + step[4:]
-        if np.abs(step).max() < 1e-10:
-            break
-    res = s * (q @ R.T @ PI.T) + t - p
-    return s, R, t, float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
-
-
-def _pose_jacobian(u) -> np.ndarray:
-    """(2L, 6) derivative of ``Pi u + t`` (rig units, s = 1) for rotated points u (L, 3) with respect
-    to (log s, rotation increment w with R <- exp(w) R, t)."""
-    L = len(u)
-    J = np.zeros((L, 2, 6))
-    J[:, 0, 0], J[:, 1, 0] = u[:, 0], -u[:, 1]
-    # d(Pi exp(w) u)/dw = Pi (-[u]x): x-row [0, u3, -u2], y-row [u3, 0, -u1] (with Pi's sign)
-    J[:, 0, 2], J[:, 0, 3] = u[:, 2], -u[:, 1]
-    J[:, 1, 1], J[:, 1, 3] = u[:, 2], -u[:, 0]
-    J[:, 0, 4] = 1.0
-    J[:, 1, 5] = 1.0
-    return J.reshape(-1, 6)
 
 
 @dataclass(frozen=True)
@@ -309,7 +227,7 @@ class RigRetargeter:
         b = (((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1)                      # rig units
         # variable projection: the pose may still move along its 6 linearised directions (at the
         # current landmarks), so the weights see the data with those directions projected out
-        Qp, _ = np.linalg.qr(_pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T))
+        Qp, _ = np.linalg.qr(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T))
         E = E - Qp @ (Qp.T @ E)
         b = b - Qp @ (Qp.T @ b)
         G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
@@ -432,72 +350,6 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
     if lm.ndim == 3 and lm.shape[1] != len(idx):
         raise InputError(f"landmark indices: expected {lm.shape[1]} indices (one per capture landmark), found {len(idx)}")
     return RigRetargeter(rig, idx, pairs, smooth, ridge, **kw).run(landmarks, lost, fps)
-
-
-# ----------------------------------------------------------------------------------------------
-# what the landmarks can see
-
-@dataclass(frozen=True)
-class Identifiability:
-    """How well the landmarks determine each shape (frontal view, neutral pose).
-
-    Attributes
-    ----------
-    names : k shape names
-    motion : (k,) rms landmark motion per unit weight (rig units); ~0 means the landmarks do not
-        see the shape at all
-    independence : (k,) ``||(I - P_others) J_i|| / ||J_i||``: the part of the shape's landmark motion
-        that no combination of the other shapes and the pose (scale, rotation, translation) can
-        produce; ~0 means it cannot be told apart (without bounds and exclusive pairs)
-    closest : (k,) name of the other shape whose landmark motion is most parallel
-    cosine : (k,) signed cosine with it (-1: exactly opposite, e.g. mouthLeft / mouthRight)
-    singular_values : singular values of the column-normalised landmark Jacobian [shapes | pose]
-    """
-
-    names: tuple[str, ...]
-    motion: np.ndarray
-    independence: np.ndarray
-    closest: tuple[str, ...]
-    cosine: np.ndarray
-    singular_values: np.ndarray
-
-    def weak(self, motion_tol: float = 0.02, independence_tol: float = 0.1) -> list[str]:
-        """Shapes the landmarks see too little of, or cannot separate from the others/pose."""
-        return [n for n, m, i in zip(self.names, self.motion, self.independence)
-                if m < motion_tol or i < independence_tol]
-
-
-def landmark_jacobian(rig: Rig, indices) -> np.ndarray:
-    """(2L, k + 6) Jacobian of the projected landmarks (frontal, s = 1) with respect to the weights
-    and the pose (log s, rotation vector, t), at the neutral."""
-    idx = np.asarray(indices, np.int64)
-    D = rig.deltas[:, idx]                         # (k, L, 3)
-    Jw = np.einsum("ij,klj->lik", PI, D).reshape(-1, rig.n_shapes)
-    Jp = _pose_jacobian(rig.neutral[idx])
-    return np.concatenate([Jw, Jp], axis=1)
-
-
-def identifiability(rig: Rig, indices) -> Identifiability:
-    """Which shapes the landmarks can tell apart (see :class:`Identifiability`)."""
-    J = landmark_jacobian(rig, indices)
-    k = rig.n_shapes
-    L = len(indices)
-    norms = np.linalg.norm(J, axis=0)
-    motion = norms[:k] / np.sqrt(L)
-    Jn = J / np.where(norms > 0, norms, 1.0)
-    indep = np.zeros(k)
-    for i in range(k):                 # k small least-squares problems (shapes, not vertices)
-        if norms[i] <= 1e-12:
-            continue
-        others = np.delete(Jn, i, axis=1)
-        coef, *_ = np.linalg.lstsq(others, Jn[:, i], rcond=1e-10)
-        indep[i] = float(np.linalg.norm(Jn[:, i] - others @ coef))
-    C = Jn[:, :k].T @ Jn[:, :k]
-    np.fill_diagonal(C, 0.0)
-    j = np.argmax(np.abs(C), axis=1)
-    cos = C[np.arange(k), j]
-    sv = np.linalg.svd(Jn, compute_uv=False)
-    return Identifiability(rig.names, motion, indep, tuple(rig.names[i] for i in j), cos, sv)
 
 
 __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.rig import Rig
-from .rigdrive import project_landmarks, rotation_from_vector
+from .pose import project_landmarks, rotation_from_vector
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """A suite of weight-step instances (Gao et al. 2015, eq. 5) for verifying how constraints are handled.
 
 Every instance is one example's problem ``x^T G x - 2 c^T x + const + lam ||x - x~||^2`` on
-``[0, 1]^k`` with ``x_a x_b = 0`` for the exclusive pairs (:class:`facebasis.rigging.certify.WeightInstance`).
+``[0, 1]^k`` with ``x_a x_b = 0`` for the exclusive pairs: a named one-example
+:class:`facebasis.rigging.weightproblem.WeightProblem` (:class:`~facebasis.rigging.weightproblem.WeightInstance`).
 
 ``weight_suite("ict")`` (ICT data from ``../shared``; 53 shapes, 12 pairs) or
 ``weight_suite("default")`` (the built-in face; 15 shapes, 5 pairs) returns, in this order:
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facebasis.rigging.certify import WeightInstance
+from facebasis.rigging.weightproblem import WeightInstance, WeightProblem
 
 ICT_SUITE_PAIRS = (
     ("mouthLeft", "mouthRight"), ("jawLeft", "jawRight"), ("eyeLookIn_L", "eyeLookOut_L"),
@@ -36,11 +37,8 @@ def _gram_instances(kind, B, T, priors, lam, pairs, tag):
     """Instances for expressions T (m, 3n) against blendshapes B (k, 3n)."""
     G = B @ B.T
     C = B @ T.T
-    out = []
-    for j in range(len(T)):
-        out.append(WeightInstance(f"{kind}/{tag}/{j:02d}", kind, G, C[:, j].copy(), float(T[j] @ T[j]),
-                                  np.asarray(priors[j], float), float(lam), pairs))
-    return out
+    problem = WeightProblem(G, C.T, [float(t @ t) for t in T], pairs, priors, float(lam))  # checked once
+    return [WeightInstance(f"{kind}/{tag}/{j:02d}", kind, problem.example(j)) for j in range(len(T))]
 
 
 def _adversarial(B, pairs, rng, tag):
@@ -50,7 +48,7 @@ def _adversarial(B, pairs, rng, tag):
     P = np.asarray(pairs)
 
     def inst(kind, i, t, prior, lam, Bx=B, Gx=G):
-        out.append(WeightInstance(f"{kind}/{tag}/{i}", kind, Gx, Bx @ t, float(t @ t), prior, float(lam), P))
+        out.append(WeightInstance.make(f"{kind}/{tag}/{i}", kind, Gx, Bx @ t, float(t @ t), prior, float(lam), P))
 
     # the prior pulls both weights of every pair to 0.9
     for i, lam in enumerate((1.0, 10.0, 100.0, 1000.0)):
@@ -110,8 +108,8 @@ def closed_form_instances() -> list[WeightInstance]:
         # no pairs: x = clip(c) = (0, 0.3, 1, 0.5), f = -0.09 - 3 - 0.25
         ("box-only", np.eye(4), [-1, 0.3, 2, 0.5], 0.0, [0, 0, 0, 0], 0.0, np.zeros((0, 2), int), -3.34),
     ]
-    return [WeightInstance(f"closed-form/{n}", "closed-form", np.asarray(G, float), np.asarray(c, float), float(k0),
-                           np.asarray(p, float), float(lam), P, known)
+    return [WeightInstance.make(f"closed-form/{n}", "closed-form", np.asarray(G, float), np.asarray(c, float),
+                                float(k0), np.asarray(p, float), float(lam), P, known)
             for n, G, c, k0, p, lam, P, known in cases]
 
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from facebasis.rigging.certify import (box_qp_kkt, brute_force_weights, certified_weights, solve_box_qp,
-                               weight_objective)
+from facebasis.rigging.boxqp import box_qp_kkt, solve_box_qp
+from facebasis.rigging.certify import brute_force_weights, certified_weights, weight_objective
 from facebasis.errors import InputError, SolverError
 from facebasis.rigging.formulations import FORMULATIONS, FormulationSolver
 from problems.weights_suite import closed_form_instances, weight_suite
@@ -83,7 +83,7 @@ def test_suite_has_every_kind(default_suite):
     kinds = {i.kind for i in default_suite}
     assert len(default_suite) >= 50
     assert kinds == {"natural", "prior-both", "data-both", "near-tie", "on-bounds", "collinear", "closed-form"}
-    cond = max(np.linalg.cond(i.G) for i in default_suite if i.kind == "collinear")
+    cond = max(np.linalg.cond(i.problem.G) for i in default_suite if i.kind == "collinear")
     assert cond > 1e6  # genuinely ill-conditioned
 
 
@@ -98,7 +98,7 @@ def test_certified_is_never_worse_than_any_ipopt_formulation(default_suite):
             key = (form, inst.k, inst.pairs.tobytes())
             if key not in solvers:
                 solvers[key] = FormulationSolver(inst.k, inst.pairs, form)
-            r = solvers[key].solve(inst.G, inst.c, inst.const, inst.prior, inst.lam)
+            r = solvers[key].solve_problem(inst.problem)
             # an IPOPT answer can only be lower by being infeasible; project it onto its own branch
             # (smaller weight of each pair zeroed, clipped to the box) and compare the feasible point
             x = np.clip(r.x, 0.0, 1.0)
@@ -114,11 +114,11 @@ def test_polished_weight_step_is_the_certified_optimum(default_suite):
     from facebasis.rigging.weights import WeightSolver
 
     insts = [i for i in default_suite if i.kind == "natural"][:6]
-    G = insts[0].G
-    C = np.stack([i.c for i in insts], axis=1)
-    const = np.array([i.const for i in insts])
-    prior = np.stack([i.prior for i in insts])
-    sol = WeightSolver(insts[0].k, len(insts), insts[0].pairs).solve(G, C, const, prior, insts[0].lam)
+    p = insts[0].problem
+    C = np.stack([i.problem.c[0] for i in insts], axis=1)
+    const = np.array([i.problem.const[0] for i in insts])
+    prior = np.stack([i.problem.prior[0] for i in insts])
+    sol = WeightSolver(p.k, len(insts), p.pairs).solve(p.G, C, const, prior, p.lam)
     for j, inst in enumerate(insts):
         assert inst.objective(sol.weights[j]) == pytest.approx(inst.certify().objective, rel=1e-10)
     assert sol.certificate_gap <= 1e-9 * (1 + abs(sol.objective))
@@ -133,9 +133,9 @@ def test_negative_definite_gram_is_rejected():
 
 
 def test_nan_data_is_rejected():
-    with pytest.raises(InputError, match="expected finite c, found NaN"):
+    with pytest.raises(InputError, match="expected finite Gram matrices and prior weights, found NaN/inf in c"):
         certified_weights(np.eye(3), [0.0, np.nan, 0.0], 0.0, [(0, 1)])
-    with pytest.raises(InputError, match="expected finite G, found NaN"):
+    with pytest.raises(InputError, match="expected finite Gram matrices and prior weights, found NaN/inf in G"):
         certified_weights(np.full((2, 2), np.nan), np.zeros(2), 0.0, [])
 
 
@@ -151,10 +151,15 @@ def test_other_malformed_instances():
         certified_weights(np.array([[1.0, 0.5], [0.0, 1.0]]), np.zeros(2), 0.0, [])
     with pytest.raises(InputError, match=r"expected shape indices in \[0, 2\), found \[\[0, 5\]\]"):
         certified_weights(np.eye(2), np.zeros(2), 0.0, [(0, 5)])
-    with pytest.raises(InputError, match="expected c and prior of length 2"):
+    with pytest.raises(InputError, match=r"linear terms c: expected shape \(m, 2\) \(or \(2,\) for one example\), "
+                                         r"found \(3,\)"):
         certified_weights(np.eye(2), np.zeros(3), 0.0, [])
-    with pytest.raises(InputError, match="lambda: expected a finite value >= 0, found -1"):
+    with pytest.raises(InputError, match=r"prior: expected shape \(1, 2\) or None, found \(1, 3\)"):
+        certified_weights(np.eye(2), np.zeros(2), 0.0, [], prior=np.zeros(3))
+    with pytest.raises(InputError, match="lambda: expected >= 0, found -1"):
         certified_weights(np.eye(2), np.zeros(2), 0.0, [], lam=-1.0)
+    with pytest.raises(InputError, match="lambda: expected a finite number, found inf"):
+        certified_weights(np.eye(2), np.zeros(2), 0.0, [], lam=np.inf)
     with pytest.raises(InputError, match="formulation: expected one of"):
         FormulationSolver(2, [(0, 1)], "magic")
 
@@ -177,6 +182,12 @@ def test_one_definition_of_the_residuals_serves_single_examples_and_batches():
     assert complementarity_violation(X[0], P) == pytest.approx(0.1)        # 0.5 * 0.2
     assert complementarity_violation(X, np.zeros((0, 2), int)) == 0.0
     assert bound_violation(X) == pytest.approx(0.2) and bound_violation(X[0]) == 0.0
-    inst = WeightInstance("t", "test", np.eye(4), np.ones(4), 4.0, np.zeros(4), 0.0, P)
-    assert inst.complementarity(X[1]) == pytest.approx(0.36) and inst.bound_violation(X[1]) == pytest.approx(0.2)
+    inst = WeightInstance.make("t", "test", np.eye(4), np.ones(4), 4.0, np.zeros(4), 0.0, P)
+    assert inst.problem.complementarity(X[1]) == pytest.approx([0.36])
+    assert inst.problem.bounds(X[1]) == pytest.approx([0.2])
     assert inst.objective(np.ones(4)) == pytest.approx(4 - 8 + 4)
+    # the batched problem gives the same numbers row by row
+    from facebasis.rigging.weightproblem import WeightProblem
+
+    batch = WeightProblem(np.eye(4), np.ones((2, 4)), [4.0, 4.0], P)
+    assert batch.complementarity(X) == pytest.approx([0.1, 0.36]) and batch.bounds(X) == pytest.approx([0.0, 0.2])

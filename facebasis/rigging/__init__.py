@@ -10,8 +10,11 @@ Modules
 problem        the generation problem, its options and its result
 basis          the basis step (eq. 2-4), vectorised over triangles, and its array layouts
 generation     precompute once, alternate the steps (``BlendshapeGenerator``, ``generate_blendshapes``)
+weightproblem  the eq. 5 weight problem (``WeightProblem``: data, objective, residuals, pair checks)
+               and its solutions (``WeightSolution``)
 weights        the eq. 5 weight step: the certified solver and the CasADi/IPOPT model
-certify        exact box QPs and branch and bound over exclusive pairs (certified optima)
+certify        branch and bound over exclusive pairs (certified optima of a ``WeightProblem``)
+boxqp          exact convex box-constrained QPs (DAQP + active-set refinement), the tree's nodes
 formulations   IPOPT formulations of complementarity compared against the certified optimum
 examples       training inputs: example meshes, rough-weight files, exclusive pairs
 runs           writing a generation run as a rig folder (weights, history, residuals, glTF)

@@ -1,6 +1,7 @@
 """Certified global optima of the weight subproblem (Gao et al. 2015, eq. 5) by branch and bound.
 
-Given the blendshapes, the examples of eq. 5 are independent. For one example the problem is
+Given the blendshapes, the examples of eq. 5 are independent (:class:`~facebasis.rigging.weightproblem.WeightProblem`).
+For one example the problem is
 
     min_x  f(x) = x^T (G + lambda I) x - 2 (c + lambda x~)^T x + t^T t + lambda ||x~||^2
     s.t.   0 <= x_i <= 1,    x_a x_b = 0  for every exclusive pair (a, b),
@@ -20,10 +21,7 @@ global optimum:
 
 Nodes are explored best-bound first, so when the tree closes the smallest open bound is the
 certificate: ``lower_bound <= f* <= objective`` with ``objective - lower_bound <= gap_tol``.
-
-Each box-QP is solved by DAQP (Arnström, Bemporad & Axehill 2022, an exact dual active-set
-method, MIT licence) and then refined on its active set with one dense linear solve, so bounds
-hold exactly and the KKT residual is at rounding level; the residual is reported.
+Each branch's box-QP is solved exactly by :func:`facebasis.rigging.boxqp.solve_box_qp`.
 
 References
 ----------
@@ -42,100 +40,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, SolverError
-
-#: DAQP exit flags that mean "optimal" (1) or "optimal, soft constraints violated" (2).
-_DAQP_OK = (1, 2)
-
-
-@dataclass(frozen=True)
-class BoxQPSolution:
-    """Minimiser of ``1/2 x^T H x + g^T x`` on ``lo <= x <= hi``.
-
-    x : (n,) minimiser; value : ``1/2 x^T H x + g^T x``; kkt_residual : max over i of
-    ``|clip(x - grad, lo, hi) - x|`` (0 exactly at an optimum); iterations : DAQP's; refined : the
-    active-set refinement was accepted.
-    """
-
-    x: np.ndarray
-    value: float
-    kkt_residual: float
-    iterations: int
-    refined: bool
+from .boxqp import DAQP_OK, BoxQPSolution, box_qp_kkt, solve_box_qp  # noqa: F401 (re-exported)
+from .weightproblem import (  # noqa: F401 (re-exported)
+    WeightInstance, WeightProblem, WeightSolution, bound_violation, complementarity_violation,
+)
 
 
-def box_qp_kkt(H, g, x, lo, hi) -> float:
-    """Max KKT residual of ``min 1/2 x^T H x + g^T x, lo <= x <= hi`` at x (projected gradient)."""
-    if len(x) == 0:
-        return 0.0
-    grad = H @ x + g
-    return float(np.max(np.abs(np.clip(x - grad, lo, hi) - x)))
-
-
-def solve_box_qp(H, g, lo=0.0, hi=1.0, *, active_tol: float = 1e-9) -> BoxQPSolution:
-    """Exact minimiser of a convex box-constrained QP (H (n, n) symmetric positive semidefinite).
-
-    DAQP finds the optimal active set; the free variables are then re-solved from
-    ``H_FF x_F = -(g_F + H_FA x_A)`` with the active ones exactly on their bounds, and the refined
-    point is kept if it is feasible and its multipliers have the right signs.
-    """
-    import daqp
-
-    H = np.ascontiguousarray(H, dtype=np.float64)
-    g = np.ascontiguousarray(g, dtype=np.float64)
-    n = len(g)
-    lo = np.broadcast_to(np.asarray(lo, np.float64), (n,)).copy()
-    hi = np.broadcast_to(np.asarray(hi, np.float64), (n,)).copy()
-    if n == 0:
-        return BoxQPSolution(np.zeros(0), 0.0, 0.0, 0, True)
-    x, _, flag, info = daqp.solve(H, g, np.zeros((0, n)), hi, lo, np.zeros(n, dtype=np.int32),
-                                  primal_tol=1e-12, dual_tol=1e-12, eps_prox=-1.0)
-    if flag not in _DAQP_OK:
-        raise SolverError(f"box QP: DAQP failed with exit flag {flag} ({n} variables)", str(flag))
-    x = np.clip(np.asarray(x, np.float64), lo, hi)
-    # refinement on the active set found by DAQP
-    at_lo = x <= lo + active_tol
-    at_hi = ~at_lo & (x >= hi - active_tol)
-    free = ~(at_lo | at_hi)
-    xr = np.where(at_lo, lo, np.where(at_hi, hi, x))
-    refined = False
-    if free.any():
-        A = ~free
-        rhs = -(g[free] + H[np.ix_(free, A)] @ xr[A])
-        try:
-            xf = np.linalg.solve(H[np.ix_(free, free)], rhs)
-        except np.linalg.LinAlgError:
-            xf = None
-        if xf is not None and np.all(xf >= lo[free]) and np.all(xf <= hi[free]):
-            cand = xr.copy()
-            cand[free] = xf
-            if box_qp_kkt(H, g, cand, lo, hi) <= box_qp_kkt(H, g, x, lo, hi):
-                xr, refined = cand, True
-    else:
-        refined = box_qp_kkt(H, g, xr, lo, hi) <= box_qp_kkt(H, g, x, lo, hi)
-    if not refined:
-        xr = x
-    value = float(0.5 * xr @ H @ xr + g @ xr)
-    return BoxQPSolution(xr, value, box_qp_kkt(H, g, xr, lo, hi), int(info.get("iterations", -1)), refined)
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CertifiedSolution:
     """A certified global optimum of one example's weight problem.
 
     Attributes
     ----------
+    problem : the one-example :class:`WeightProblem` solved (its residuals give the properties below)
     x : (k,) optimal weights (bounds and every pair hold exactly)
-    objective : f(x) (eq. 5 for this example, constants included)
+    objective : f(x) (eq. 5 for this example, constants included), as the tree computed it
     lower_bound : the smallest bound among nodes open or pruned when the tree closed
     gap : objective - lower_bound (<= gap_tol * (1 + |objective|) when certified)
     nodes : box-QPs solved (tree nodes explored)
     pruned : nodes pruned by bound
     zeroed : indices fixed to zero on the optimal branch
     kkt_residual : KKT residual of the optimal branch's box-QP
-    max_complementarity, max_bound_violation : at x (0.0 exactly when certified)
     seconds : wall time
+    gap_tol : the relative tolerance of the certificate
     """
 
+    problem: WeightProblem
     x: np.ndarray
     objective: float
     lower_bound: float
@@ -144,8 +74,6 @@ class CertifiedSolution:
     pruned: int
     zeroed: tuple[int, ...]
     kkt_residual: float
-    max_complementarity: float
-    max_bound_violation: float
     seconds: float
     gap_tol: float
 
@@ -153,63 +81,27 @@ class CertifiedSolution:
     def certified(self) -> bool:
         return self.gap <= self.gap_tol * (1.0 + abs(self.objective))
 
+    @property
+    def max_complementarity(self) -> float:
+        """``max |x_a x_b|`` over the problem's pairs at x (0.0 exactly when certified)."""
+        return float(self.problem.complementarity(self.x)[0])
 
-def _check_shared(G, lam, pairs):
-    """Validate what all examples of one weight step share; returns (H = 2 (G + lam I), P, l_min(H))."""
-    G = np.asarray(G, np.float64)
-    if G.ndim != 2 or G.shape[0] != G.shape[1]:
-        raise InputError(f"Gram matrix G: expected a square (k, k) matrix, found shape {G.shape}")
-    k = G.shape[0]
-    if not np.isfinite(G).all():
-        raise InputError("weight problem: expected finite G, found NaN/inf")
-    if not np.isfinite(lam) or lam < 0:
-        raise InputError(f"lambda: expected a finite value >= 0, found {lam}")
-    if not np.allclose(G, G.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(G).max())):
-        raise InputError("Gram matrix G: expected a symmetric matrix, found an asymmetric one")
-    H = 2.0 * (0.5 * (G + G.T) + lam * np.eye(k))
-    ev = np.linalg.eigvalsh(H)
-    if ev[0] < -1e-10 * max(1.0, abs(ev[-1])):
-        raise InputError(f"Gram matrix G + lambda I: expected positive semidefinite, found smallest "
-                         f"eigenvalue {ev[0] / 2:.3g} (a Gram matrix B^T B cannot be indefinite)")
-    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if len(P) and (P.min() < 0 or P.max() >= k):
-        raise InputError(f"exclusive pairs: expected shape indices in [0, {k}), found {P.tolist()}")
-    if len(P) and np.any(P[:, 0] == P[:, 1]):
-        raise InputError(f"exclusive pairs: a pair names one shape twice: {P[P[:, 0] == P[:, 1]].tolist()}")
-    return H, P, float(ev[0])
+    @property
+    def max_bound_violation(self) -> float:
+        """Largest violation of ``0 <= x <= 1`` at x (0.0 exactly when certified)."""
+        return float(self.problem.bounds(self.x)[0])
 
 
-def _check_example(k, c, prior):
-    """Validate one example's data; returns (c, prior) as float arrays (k,)."""
-    c = np.asarray(c, np.float64).reshape(-1)
-    prior = np.zeros(k) if prior is None else np.asarray(prior, np.float64).reshape(-1)
-    if c.shape != (k,) or prior.shape != (k,):
-        raise InputError(f"weight problem: expected c and prior of length {k}, found {c.shape}, {prior.shape}")
-    for name, a in (("c", c), ("prior", prior)):
-        if not np.isfinite(a).all():
-            raise InputError(f"weight problem: expected finite {name}, found NaN/inf")
-    return c, prior
-
-
-def complementarity_violation(X, pairs) -> float:
-    """``max |x_a x_b|`` over the exclusive pairs (p, 2) and every row of ``X`` ((k,) or (m, k))."""
-    P = np.asarray(pairs, np.int64).reshape(-1, 2)
-    X = np.atleast_2d(np.asarray(X, np.float64))
-    return float(np.max(np.abs(X[:, P[:, 0]] * X[:, P[:, 1]]))) if len(P) and X.size else 0.0
-
-
-def bound_violation(X) -> float:
-    """Largest violation of ``0 <= x <= 1`` over ``X`` ((k,) or (m, k))."""
-    X = np.asarray(X, np.float64)
-    return float(max(0.0, -X.min(), X.max() - 1.0)) if X.size else 0.0
-
-
-def _violations(x, P):
-    return complementarity_violation(x, P), bound_violation(x)
+def _as_problem(G, c, const, pairs, prior, lam) -> WeightProblem:
+    if isinstance(G, WeightProblem):
+        return G
+    if c is None or const is None:
+        raise InputError("weight problem: expected c and const with a Gram matrix G (or a WeightProblem), found none")
+    return WeightProblem(G, c, const, pairs, prior, lam)
 
 
 class _Workspace:
-    """What every example of one weight step shares: ``H = 2 (G + lam I)``, the pairs and one DAQP
+    """What every example of one weight problem shares: ``H = 2 (G + lam I)``, the pairs and one DAQP
     workspace for the node relaxations. :meth:`set_example` loads an example's linear term.
 
     ``qp(zero)`` solves the box-QP with the weights ``zero`` fixed at 0 (one branch, exactly);
@@ -282,7 +174,7 @@ class _Workspace:
         sense[:k][zero] = 5                        # equality (active, immutable)
         self._model.update(bupper=upper, sense=sense)
         x, _, flag, _ = self._model.solve()
-        if flag not in _DAQP_OK:
+        if flag not in DAQP_OK:
             raise SolverError(f"certified weights: DAQP failed on a relaxation with exit flag {flag}", str(flag))
         x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
         x[zero] = 0.0
@@ -299,7 +191,7 @@ class _Workspace:
 _PAIR_TOL = 1e-10
 
 
-def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start=None,
+def certified_weights(G, c=None, const=None, pairs=(), prior=None, lam: float = 0.0, *, start=None,
                       gap_tol: float = 1e-9, max_nodes: int = 100_000) -> CertifiedSolution:
     """Global optimum of one example's eq. 5 weight problem by branch and bound over the pairs.
 
@@ -311,7 +203,8 @@ def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start
 
     Parameters
     ----------
-    G : (k, k) Gram matrix ``B^T B``
+    G : (k, k) Gram matrix ``B^T B``, or a one-example :class:`WeightProblem` (then c, const,
+        pairs, prior and lam are not used)
     c : (k,) ``B^T t`` of the example
     const : ``t^T t`` (only shifts the objective)
     pairs : (p, 2) exclusive shape index pairs
@@ -328,30 +221,50 @@ def certified_weights(G, c, const, pairs, prior=None, lam: float = 0.0, *, start
     SolverError
         the tree exceeded ``max_nodes`` or DAQP failed
     """
-    return CertifiedWeightSolver(G, pairs, lam, gap_tol=gap_tol, max_nodes=max_nodes).solve(c, const, prior,
-                                                                                             start=start)
+    problem = _as_problem(G, c, const, pairs, prior, lam)
+    if problem.m != 1:
+        raise InputError(f"certified_weights: expected a problem of one example, found {problem.m}")
+    return CertifiedWeightSolver(problem, gap_tol=gap_tol, max_nodes=max_nodes).solve_example(0, start=start)
 
 
 class CertifiedWeightSolver:
     """:func:`certified_weights` for many examples that share G, lambda and the pairs (the examples
     of one weight step): the checks, ``H``, its eigenvalues and the DAQP workspace are set up once.
 
+    ``G`` is a :class:`WeightProblem` (its examples are solved by :meth:`solve_example` and
+    :meth:`solve_all`) or a Gram matrix (k, k) with ``pairs`` and ``lam`` (examples given to
+    :meth:`solve`).
+
     >>> solver = CertifiedWeightSolver(G, pairs, lam)            # doctest: +SKIP
     >>> [solver.solve(C[:, j], const[j], prior[j]) for j in range(m)]   # doctest: +SKIP
     """
 
-    def __init__(self, G, pairs, lam: float = 0.0, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):
-        H, P, ev_min = _check_shared(G, lam, pairs)
-        self.lam, self.gap_tol, self.max_nodes = float(lam), gap_tol, max_nodes
-        self._ws = _Workspace(H, P, ev_min)
+    def __init__(self, G, pairs=(), lam: float = 0.0, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):
+        if not isinstance(G, WeightProblem):
+            k = np.shape(G)[-1] if np.ndim(G) else 0
+            G = WeightProblem(G, np.zeros((0, k)), np.zeros(0), pairs, None, lam)
+        self.problem = G
+        self.lam, self.gap_tol, self.max_nodes = G.lam, gap_tol, max_nodes
+        ev = G.eigenvalues
+        self._ws = _Workspace(G.hessian, G.pairs, float(ev[0]) if ev.size else 0.0)
 
     def solve(self, c, const, prior=None, *, start=None) -> CertifiedSolution:
-        """One example (see :func:`certified_weights` for the parameters)."""
+        """One example given by its data (see :func:`certified_weights` for the parameters)."""
+        return self._solve(self.problem.with_examples(c, const, prior), start)
+
+    def solve_example(self, j: int, *, start=None) -> CertifiedSolution:
+        """Example j of the solver's problem; ``start`` (k,) as in :func:`certified_weights`."""
+        return self._solve(self.problem.example(j), start)
+
+    def solve_all(self, start=None) -> list[CertifiedSolution]:
+        """Every example of the solver's problem; ``start`` (m, k) or None."""
+        return [self.solve_example(j, start=None if start is None else start[j]) for j in range(self.problem.m)]
+
+    def _solve(self, problem: WeightProblem, start) -> CertifiedSolution:
         gap_tol, max_nodes = self.gap_tol, self.max_nodes
         t0 = time.perf_counter()
-        inst, P, k, lam = self._ws, self._ws.P, self._ws.k, self.lam
-        c, prior = _check_example(k, c, prior)
-        inst.set_example(-2.0 * (c + lam * prior), float(const) + lam * float(prior @ prior))
+        inst, P, k = self._ws, self._ws.P, self._ws.k
+        inst.set_example(problem.linear_term(0), problem.offset(0))
         best_x, best_f, best_zero, best_kkt = None, np.inf, None, 0.0
 
         def round_and_consider(x, zero):
@@ -402,29 +315,58 @@ class CertifiedWeightSolver:
                     pruned += 1
                     closed_bound = min(closed_bound, fc)
         lower = min(best_f, closed_bound)
-        comp, bnd = _violations(best_x, P)
         return CertifiedSolution(
-            x=best_x, objective=float(best_f), lower_bound=float(lower), gap=float(max(0.0, best_f - lower)),
-            nodes=inst.count, pruned=pruned, zeroed=tuple(int(i) for i in np.flatnonzero(best_zero)),
-            kkt_residual=best_kkt, max_complementarity=comp, max_bound_violation=bnd,
+            problem=problem, x=best_x, objective=float(best_f), lower_bound=float(lower),
+            gap=float(max(0.0, best_f - lower)), nodes=inst.count, pruned=pruned,
+            zeroed=tuple(int(i) for i in np.flatnonzero(best_zero)), kkt_residual=best_kkt,
             seconds=time.perf_counter() - t0, gap_tol=gap_tol,
         )
 
 
-def brute_force_weights(G, c, const, pairs, prior=None, lam: float = 0.0):
+def certify_problem(problem: WeightProblem, start=None, free=None, *, gap_tol: float = 1e-9,
+                    max_nodes: int = 100_000) -> WeightSolution:
+    """Certified global optimum of every example of ``problem`` (they are independent given G).
+
+    One :class:`CertifiedWeightSolver` serves all examples; ``start`` (m, k) optionally seeds each.
+    ``free`` (k,) bool: only these weights may be nonzero (the others are held at 0 and their pairs
+    hold trivially; :meth:`WeightProblem.restrict`). Returns a :class:`WeightSolution` of
+    ``problem`` with the largest KKT residual, the total node count and the largest gap.
+    """
+    t0 = time.perf_counter()
+    m, k = problem.m, problem.k
+    X = np.zeros((m, k))
+    sub, idx = problem, np.arange(k)
+    if free is not None and not np.all(free):
+        sub, idx = problem.restrict(free)
+    kkt, nodes, gap = 0.0, 0, 0.0
+    if len(idx):
+        solver = CertifiedWeightSolver(sub, gap_tol=gap_tol, max_nodes=max_nodes)
+        for j in range(m):  # examples are independent given the blendshapes
+            cs = solver.solve_example(j, start=None if start is None else start[j, idx])
+            X[j, idx] = cs.x
+            kkt, nodes, gap = max(kkt, cs.kkt_residual), nodes + cs.nodes, max(gap, cs.gap)
+    return WeightSolution(problem, X, kkt_residual=kkt, polished=True, seconds=time.perf_counter() - t0,
+                          certificate_nodes=nodes, certificate_gap=gap)
+
+
+def brute_force_weights(G, c=None, const=None, pairs=(), prior=None, lam: float = 0.0):
     """Global optimum by enumerating all ``2^p`` branches (one box-QP each). For checking only.
 
-    Returns (x, objective, branches solved).
+    ``G`` is a Gram matrix with the other arguments as in :func:`certified_weights`, or a
+    one-example :class:`WeightProblem`. Returns (x, objective, branches solved).
     """
-    H, P, ev_min = _check_shared(G, lam, pairs)
-    c, prior = _check_example(len(H), c, prior)
+    problem = _as_problem(G, c, const, pairs, prior, lam)
+    P = problem.pairs
     if len(P) > 16:
         raise InputError(f"brute force: expected at most 16 pairs, found {len(P)}")
-    inst = _Workspace(H, P, ev_min)
-    inst.set_example(-2.0 * (c + lam * prior), float(const) + lam * float(prior @ prior))
+    if problem.m != 1:
+        raise InputError(f"brute force: expected a problem of one example, found {problem.m}")
+    ev = problem.eigenvalues
+    inst = _Workspace(problem.hessian, P, float(ev[0]) if ev.size else 0.0)
+    inst.set_example(problem.linear_term(0), problem.offset(0))
     best = (None, np.inf)
     for choice in itertools.product((0, 1), repeat=len(P)):
-        zero = np.zeros(len(c), bool)
+        zero = np.zeros(problem.k, bool)
         zero[P[np.arange(len(P)), list(choice)]] = True
         x, f, _ = inst.qp(zero)
         if f < best[1]:
@@ -433,49 +375,11 @@ def brute_force_weights(G, c, const, pairs, prior=None, lam: float = 0.0):
 
 
 def weight_objective(x, G, c, const, prior=None, lam: float = 0.0) -> float:
-    """One example's eq. 5 objective ``||B x - t||^2 + lambda ||x - x~||^2`` from Gram quantities."""
-    x = np.asarray(x, np.float64)
-    prior = np.zeros_like(x) if prior is None else np.asarray(prior, np.float64)
-    return float(x @ G @ x - 2.0 * c @ x + const + lam * np.sum((x - prior) ** 2))
+    """One example's eq. 5 objective ``||B x - t||^2 + lambda ||x - x~||^2`` from Gram quantities
+    (:meth:`WeightProblem.objective`)."""
+    return float(WeightProblem(G, c, const, (), prior, lam).objective(x)[0])
 
 
 __all__ = ["BoxQPSolution", "CertifiedSolution", "CertifiedWeightSolver", "box_qp_kkt", "solve_box_qp",
-           "certified_weights",
-           "brute_force_weights", "weight_objective", "complementarity_violation", "bound_violation"]
-
-
-@dataclass(frozen=True)
-class WeightInstance:
-    """One example's weight problem (eq. 5): ``x^T G x - 2 c^T x + const + lam ||x - prior||^2``
-    on ``[0, 1]^k`` with ``x_a x_b = 0`` for ``pairs``; ``known_objective`` if known in closed form."""
-
-    name: str
-    kind: str
-    G: np.ndarray
-    c: np.ndarray
-    const: float
-    prior: np.ndarray
-    lam: float
-    pairs: np.ndarray
-    known_objective: float | None = None
-
-    @property
-    def k(self) -> int:
-        return len(self.c)
-
-    def objective(self, x) -> float:
-        return weight_objective(x, self.G, self.c, self.const, self.prior, self.lam)
-
-    def complementarity(self, x) -> float:
-        """``max |x_a x_b|`` over this problem's pairs."""
-        return complementarity_violation(x, self.pairs)
-
-    def bound_violation(self, x) -> float:
-        """Largest violation of ``0 <= x <= 1``."""
-        return bound_violation(x)
-
-    def certify(self, start=None, **kw) -> CertifiedSolution:
-        return certified_weights(self.G, self.c, self.const, self.pairs, self.prior, self.lam, start=start, **kw)
-
-
-__all__ += ["WeightInstance"]
+           "certified_weights", "certify_problem", "brute_force_weights", "weight_objective",
+           "complementarity_violation", "bound_violation", "WeightInstance", "WeightProblem", "WeightSolution"]

@@ -19,7 +19,9 @@ lambda and its own parameter, and reused for every instance of the same size and
     ``f + rho sum x_a x_b`` (only bounds as constraints), rho = 1, 10, ... until the pairs hold to
     1e-9 or rho = 1e8 (an exact penalty for MPCCs, Ralph & Wright 2004).
 
-The certified optimum from :func:`facebasis.rigging.certify.certified_weights` is the yardstick.
+The certified optimum from :func:`facebasis.rigging.certify.certified_weights` is the yardstick;
+objectives and residuals of every answer come from its
+:class:`~facebasis.rigging.weightproblem.WeightProblem`.
 
 References
 ----------
@@ -35,7 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .certify import bound_violation, complementarity_violation, weight_objective
+from ..errors import InputError
+from .weightproblem import WeightProblem, check_pairs
 from .weights import IPOPT_OK
 
 FORMULATIONS = ("equality", "inequality", "scholtes", "penalty")
@@ -43,23 +46,34 @@ SCHOLTES_EPS = tuple(10.0 ** -e for e in range(1, 9))
 PENALTY_RHO = tuple(10.0 ** e for e in range(0, 9))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FormulationResult:
-    """One IPOPT formulation on one instance: raw answer x (k,), eq. 5 objective there, IPOPT
-    statuses of every solve, total IPOPT iterations, violations and wall time."""
+    """One IPOPT formulation on one example's problem: raw answer x (k,), IPOPT statuses of every
+    solve, total IPOPT iterations and wall time; the eq. 5 objective and the violations at x come
+    from ``problem`` (one example)."""
 
     formulation: str
+    problem: WeightProblem
     x: np.ndarray
-    objective: float
     statuses: tuple[str, ...]
     iterations: int
-    max_complementarity: float
-    max_bound_violation: float
     seconds: float
 
     @property
     def success(self) -> bool:
         return all(s in IPOPT_OK for s in self.statuses)
+
+    @property
+    def objective(self) -> float:
+        return float(self.problem.objective(self.x)[0])
+
+    @property
+    def max_complementarity(self) -> float:
+        return float(self.problem.complementarity(self.x)[0])
+
+    @property
+    def max_bound_violation(self) -> float:
+        return float(self.problem.bounds(self.x)[0])
 
 
 class FormulationSolver:
@@ -68,12 +82,10 @@ class FormulationSolver:
     def __init__(self, k: int, pairs, formulation: str = "equality", ipopt_options: dict | None = None):
         import casadi as ca
 
-        from ..errors import InputError
-
         if formulation not in FORMULATIONS:
             raise InputError(f"formulation: expected one of {FORMULATIONS}, found {formulation!r}")
         self.k, self.formulation = int(k), formulation
-        self.pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        self.pairs = check_pairs(pairs, self.k)
         P = self.pairs
         x = ca.MX.sym("x", k)
         G = ca.MX.sym("G", k, k)
@@ -96,11 +108,20 @@ class FormulationSolver:
         self._solver = ca.nlpsol(f"weights_{formulation}", "ipopt", nlp, opts)
 
     def solve(self, G, c, const, prior, lam: float, x0=None) -> FormulationResult:
+        """One example: G (k, k), c (k,), const, prior (k,), lam (see :meth:`solve_problem`)."""
+        return self.solve_problem(WeightProblem(G, c, const, self.pairs, prior, lam), x0)
+
+    def solve_problem(self, problem: WeightProblem, x0=None) -> FormulationResult:
+        """IPOPT on a one-example problem with this solver's k and pairs, from x0 (k,) (default: the
+        prior clipped to [0, 1])."""
         t0 = time.perf_counter()
         k, P = self.k, self.pairs
-        prior = np.asarray(prior, float)
+        if (problem.m, problem.k) != (1, k) or not np.array_equal(problem.pairs, P):
+            raise InputError(f"formulation {self.formulation}: expected one example, {k} shapes and the pairs "
+                             f"{P.tolist()}, found {problem.m}, {problem.k} and {problem.pairs.tolist()}")
+        prior = problem.prior[0]
         x = np.clip(prior if x0 is None else np.asarray(x0, float), 0.0, 1.0)
-        base = np.concatenate([np.asarray(G, float).ravel(order="F"), np.asarray(c, float), prior, [lam]])
+        base = np.concatenate([problem.G.ravel(order="F"), problem.c[0], prior, [problem.lam]])
         statuses, iters = [], 0
 
         def run(par, ubg):
@@ -122,19 +143,16 @@ class FormulationSolver:
         else:
             for rho in PENALTY_RHO:
                 run(rho, 0.0)
-                if complementarity_violation(x, P) <= 1e-9:
+                if problem.complementarity(x)[0] <= 1e-9:
                     break
-        G = np.asarray(G, float)
-        obj = weight_objective(x, G, np.asarray(c, float), const, prior, lam)
-        comp, bnd = complementarity_violation(x, P), bound_violation(x)
-        return FormulationResult(self.formulation, x, obj, tuple(statuses), iters, comp, bnd, time.perf_counter() - t0)
+        return FormulationResult(self.formulation, problem, x, tuple(statuses), iters, time.perf_counter() - t0)
 
 
 __all__ = ["FORMULATIONS", "FormulationResult", "FormulationSolver"]
 
 
 def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 1e-6, progress=None) -> list[dict]:
-    """Solve every instance (:class:`facebasis.rigging.certify.WeightInstance`) with the certified solver and
+    """Solve every instance (:class:`facebasis.rigging.weightproblem.WeightInstance`) with the certified solver and
     with each IPOPT formulation; one row per (instance, method) as plain dicts (a results table).
 
     Columns: instance, kind, method, objective, certified_objective, relative_gap (method minus
@@ -153,7 +171,7 @@ def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 
             key = (form, inst.k, inst.pairs.tobytes())
             if key not in solvers:
                 solvers[key] = FormulationSolver(inst.k, inst.pairs, form)
-            r = solvers[key].solve(inst.G, inst.c, inst.const, inst.prior, inst.lam)
+            r = solvers[key].solve_problem(inst.problem)
             gap = (r.objective - cs.objective) / max(1.0, abs(cs.objective))
             rows.append({**base, "method": form, "objective": r.objective, "relative_gap": gap,
                          "reached": abs(gap) <= rel_tol, "max_complementarity": r.max_complementarity,

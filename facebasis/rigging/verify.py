@@ -8,9 +8,10 @@ stored weight vector should be the global optimum of its example's problem
 
     min_x ||B x - t_j||^2 + lambda ||x - x~_j||^2,   0 <= x <= 1,   x_a x_b = 0.
 
-This module recomputes the Gram data from the meshes on disk, solves each example with
-:func:`facebasis.rigging.certify.certified_weights`, and reports per example the objective gap of the
-stored weights, their complementarity and bound residuals and a verdict.
+This module rebuilds the :class:`~facebasis.rigging.weightproblem.WeightProblem` from the meshes on
+disk, solves each example with :class:`facebasis.rigging.certify.CertifiedWeightSolver`, and reports
+per example the objective gap of the stored weights, their complementarity and bound residuals (from
+the problem) and a verdict.
 
 References
 ----------
@@ -27,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation, weight_objective
-from .weights import gram_data
+from .certify import CertifiedWeightSolver
+from .weightproblem import WeightProblem, pair_products
 from ..errors import InputError
 from ..jsonio import read_json
 
@@ -180,30 +181,22 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
         rig.index([a, b], what=f"--exclusive {a}:{b}")
         if a == b:
             raise InputError(f"--exclusive {a}:{b}: expected two different shapes, found one twice")
-    G, C, consts = gram_data(rig, T)
-    out = []
+    problem = WeightProblem.from_rig(rig, T, pairs, prior, lam)
     # shapes the run held at 0 (no support in the examples) stay at 0: certify over the others
-    idx = np.flatnonzero(free)
-    pos = np.full(rig.n_shapes, -1)
-    pos[idx] = np.arange(len(idx))
-    sub_pairs = pos[pairs[(pos[pairs] >= 0).all(axis=1)]] if len(pairs) else pairs
-    certifier = CertifiedWeightSolver(G[np.ix_(idx, idx)], sub_pairs, lam)
+    sub, idx = problem.restrict(free)
+    certifier = CertifiedWeightSolver(sub)
+    f_stored, comp, bound = problem.objective(stored), problem.complementarity(stored), problem.bounds(stored)
+    out = []
     for j, name in enumerate(names):
-        const = float(consts[j])
-        held_prior = lam * float(prior[j, ~free] @ prior[j, ~free])  # (0 - x~)^2 of the held weights
-        cs = certifier.solve(C[idx, j], const + held_prior, prior[j, idx], start=stored[j, idx])
-        x = stored[j]
-        f = weight_objective(x, G, C[:, j], const, prior[j], lam)
-        comp = complementarity_violation(x, pairs)
-        bound = bound_violation(x)
-        gap = (f - cs.objective) / max(1.0, abs(cs.objective))
-        ok = gap <= tolerance and comp <= residual_tolerance and bound <= residual_tolerance
-        out.append(ExampleVerdict(name, f, cs.objective, gap, comp, bound, cs.nodes, ok))
+        cs = certifier.solve_example(j, start=stored[j, idx])
+        gap = (f_stored[j] - cs.objective) / max(1.0, abs(cs.objective))
+        ok = gap <= tolerance and comp[j] <= residual_tolerance and bound[j] <= residual_tolerance
+        out.append(ExampleVerdict(name, float(f_stored[j]), cs.objective, float(gap), float(comp[j]), float(bound[j]),
+                                  cs.nodes, bool(ok)))
     checked = []
     run_keys = {frozenset(p) for p in run_pairs}
     for a, b in extra:
-        ia, ib = rig.index([a, b])
-        prod = np.abs(stored[:, ia] * stored[:, ib])
+        prod = pair_products(stored, np.array([rig.index([a, b])]))
         worst = int(np.argmax(prod))
         checked.append(PairCheck(a, b, float(prod[worst]), names[worst], frozenset((a, b)) in run_keys,
                                  bool(prod[worst] <= residual_tolerance)))

@@ -19,6 +19,11 @@ the bounds and every complementarity constraint exactly, is a certified global o
 example's problem and is never worse than IPOPT's; IPOPT's status, its raw answer and the
 certificate (nodes, gap, KKT residual) are all reported.
 
+The problem's data, objective and residuals are :class:`~facebasis.rigging.weightproblem.WeightProblem`'s,
+the answer a :class:`~facebasis.rigging.weightproblem.WeightSolution` of it: this module only adds
+the CasADi/IPOPT model (:meth:`WeightSolver.solve_problem`) and the array-level entry points the
+generator calls (:meth:`WeightSolver.solve`, :func:`solve_certified`, :func:`certified_examples`).
+
 References
 ----------
 - Gao Yali, Tan Guanghua, Guo Songrui, Fan Xiaowei. Example-based facial blendshape generation
@@ -28,11 +33,14 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
 
 import numpy as np
 
-from .certify import CertifiedWeightSolver, bound_violation, complementarity_violation  # noqa: F401 (re-exported)
+from .certify import CertifiedWeightSolver, certify_problem  # noqa: F401 (re-exported)
+from .weightproblem import (  # noqa: F401 (re-exported)
+    IPOPT_NOT_RUN, WeightProblem, WeightSolution, bound_violation, check_pairs, complementarity_violation, gram_data,
+)
 from ..errors import InputError, SolverError
 from ..interrupt import interruptible
 
@@ -40,68 +48,16 @@ from ..interrupt import interruptible
 IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
 
-@dataclass(frozen=True)
-class WeightSolution:
-    """Result of one weight step.
-
-    Attributes
-    ----------
-    weights : (m, k) solved weights (after polishing, if enabled)
-    objective : float, eq. 5 objective at ``weights`` (including the constant ``sum t^T t``)
-    ipopt_status : IPOPT's own return status string
-    ipopt_iterations : IPOPT iteration count
-    ipopt_success : whether the status is one of :data:`IPOPT_OK`
-    ipopt_weights : (m, k) IPOPT's raw answer
-    ipopt_objective : eq. 5 objective at the raw answer
-    max_complementarity : max |x_a x_b| over pairs and examples, at ``weights``
-    max_bound_violation : max violation of 0 <= x <= 1 at ``weights``
-    ipopt_max_complementarity, ipopt_max_bound_violation : the same at IPOPT's raw answer
-    kkt_residual : max KKT residual of the optimal branches' box-QPs (0 if not polished)
-    polished : whether ``weights`` come from the certified polish
-    seconds : wall time of IPOPT + polish
-    certificate_nodes : box-QPs solved by branch and bound over all examples
-    certificate_gap : largest ``objective - lower bound`` over the examples (NaN if not polished)
-    """
-
-    weights: np.ndarray
-    objective: float
-    ipopt_status: str
-    ipopt_iterations: int
-    ipopt_success: bool
-    ipopt_weights: np.ndarray
-    ipopt_objective: float
-    max_complementarity: float
-    max_bound_violation: float
-    ipopt_max_complementarity: float
-    ipopt_max_bound_violation: float
-    kkt_residual: float
-    polished: bool
-    seconds: float
-    certificate_nodes: int = 0
-    certificate_gap: float = float("nan")
-
-
-def gram_data(rig, expressions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The Gram quantities of eq. 5 for expressions (m, n, 3) against a rig's blendshapes:
-    ``G = B^T B`` (k, k), ``C = B^T t_j`` (k, m) and ``const = t_j^T t_j`` (m,), with
-    ``t_j = T_j - B_0`` flattened; BLAS on one thread (its spinning threads cost more than they
-    gain for these sizes on a shared machine)."""
-    from threadpoolctl import threadpool_limits
-
-    T = (np.asarray(expressions, np.float64) - rig.neutral).reshape(len(expressions), -1)
-    B = rig.deltas.reshape(rig.n_shapes, -1)
-    with threadpool_limits(1):
-        G, C = B @ B.T, B @ T.T
-    return G, C, np.einsum("ij,ij->i", T, T)
+def _problem(G, C, const, X_prior, lam, pairs) -> WeightProblem:
+    """The :class:`WeightProblem` of the array arguments below (C (k, m), one column per example)."""
+    C = np.asarray(C, float)
+    return WeightProblem(G, C.T if C.ndim == 2 else C, const, pairs, X_prior, lam)
 
 
 def eq5_objective(X, G, C, const, X_prior, lam) -> float:
-    """Eq. 5 objective for weights X (m, k), G (k, k), C (k, m), const (m,) = t_j^T t_j."""
-    X = np.asarray(X, float)
-    data = np.einsum("jk,kl,jl->", X, G, X) - 2.0 * np.einsum("kj,jk->", C, X) + float(np.sum(const))
-    return float(data + lam * np.sum((X - X_prior) ** 2))
-
-
+    """Eq. 5 objective for weights X (m, k), G (k, k), C (k, m), const (m,) = t_j^T t_j
+    (:meth:`WeightProblem.total_objective`)."""
+    return _problem(G, C, const, X_prior, lam, ()).total_objective(X)
 
 
 class WeightSolver:
@@ -121,11 +77,7 @@ class WeightSolver:
         import casadi as ca
 
         self.k, self.m = int(n_shapes), int(n_examples)
-        P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-        if len(P) and (P.min() < 0 or P.max() >= self.k):
-            raise InputError(f"exclusive pairs: expected shape indices in [0, {self.k}), found {P.tolist()}")
-        if len(P) and np.any(P[:, 0] == P[:, 1]):
-            raise InputError(f"exclusive pairs: a pair names one shape twice: {P[P[:, 0] == P[:, 1]].tolist()}")
+        P = check_pairs(pairs, self.k)
         self.pairs = P
         self.polish = polish
         k, m = self.k, self.m
@@ -170,30 +122,33 @@ class WeightSolver:
 
         Raises
         ------
+        InputError
+            malformed data (:class:`WeightProblem`'s checks) or sizes other than the model's
         SolverError
             IPOPT fails and no polish is requested; the message carries IPOPT's status.
         """
-        import time
+        k, m = self.k, self.m
+        shapes = tuple(np.shape(a) for a in (G, C, X_prior))
+        if shapes != ((k, k), (k, m), (m, k)):
+            raise InputError(f"weight step: expected G {(k, k)}, C {(k, m)}, prior {(m, k)}, found "
+                             f"{', '.join(map(str, shapes))}")
+        return self.solve_problem(_problem(G, C, const, X_prior, lam, self.pairs), X0, free)
 
+    def solve_problem(self, problem: WeightProblem, X0=None, free=None) -> WeightSolution:
+        """Solve ``problem`` (its k, m and pairs must be the model's); X0, free as in :meth:`solve`."""
         t0 = time.perf_counter()
         k, m = self.k, self.m
-        G = np.asarray(G, float)
-        C = np.asarray(C, float)
-        X_prior = np.asarray(X_prior, float)
-        if G.shape != (k, k) or C.shape != (k, m) or X_prior.shape != (m, k):
-            raise InputError(f"weight step: expected G {(k, k)}, C {(k, m)}, prior {(m, k)}, found "
-                             f"{G.shape}, {C.shape}, {X_prior.shape}")
-        if not (np.isfinite(G).all() and np.isfinite(C).all() and np.isfinite(X_prior).all()):
-            raise InputError("weight step: expected finite Gram matrices and prior weights, found NaN/inf")
-        if lam < 0:
-            raise InputError(f"lambda: expected >= 0, found {lam}")
-        x0 = np.clip(X_prior if X0 is None else X0, 0.0, 1.0)
+        if (problem.k, problem.m) != (k, m) or not np.array_equal(problem.pairs, self.pairs):
+            raise InputError(f"weight step: expected a problem of {m} examples, {k} shapes and the pairs "
+                             f"{self.pairs.tolist()}, found {problem.m}, {problem.k} and {problem.pairs.tolist()}")
+        x0 = np.clip(problem.prior if X0 is None else X0, 0.0, 1.0)
         ub = 1.0
         if free is not None:
             ub = np.broadcast_to(np.where(np.asarray(free, bool), 1.0, 0.0), (m, k))
             x0 = np.minimum(x0, ub)
             ub = ub.ravel()
-        p = np.concatenate([G.ravel(order="F"), C.ravel(order="F"), X_prior.T.ravel(order="F"), [lam]])
+        p = np.concatenate([problem.G.ravel(order="F"), problem.c.T.ravel(order="F"),
+                            problem.prior.T.ravel(order="F"), [problem.lam]])
         args = {"x0": x0.ravel(), "p": p, "lbx": 0.0, "ubx": ub}
         if self.n_constraints:
             args.update(lbg=0.0, ubg=0.0)
@@ -204,62 +159,30 @@ class WeightSolver:
         iters = int(stats.get("iter_count", -1))
         X_ipopt = np.asarray(sol["x"]).reshape(m, k)
         ok = status in IPOPT_OK
-        const = np.asarray(const, float)
-        obj_ipopt = eq5_objective(X_ipopt, G, C, const, X_prior, lam)
-        X, kkt, nodes, gap = X_ipopt, 0.0, 0, float("nan")
+        info = {"kkt_residual": 0.0, "certificate_nodes": 0, "certificate_gap": float("nan")}
+        X = X_ipopt
         if self.polish:
-            X, kkt, nodes, gap = certified_examples(G, C, const, X_prior, lam, self.pairs, start=X_ipopt, free=free)
+            cert = certify_problem(problem, start=X_ipopt, free=free)
+            X = cert.X
+            info = {"kkt_residual": cert.kkt_residual, "certificate_nodes": cert.certificate_nodes,
+                    "certificate_gap": cert.certificate_gap}
         elif not ok:
             raise SolverError(f"weight step: IPOPT failed with status {status} after {iters} iterations", status)
-        return WeightSolution(
-            weights=X, objective=eq5_objective(X, G, C, const, X_prior, lam), ipopt_status=status,
-            ipopt_iterations=iters, ipopt_success=ok, ipopt_weights=X_ipopt, ipopt_objective=obj_ipopt,
-            max_complementarity=complementarity_violation(X, self.pairs), max_bound_violation=bound_violation(X),
-            ipopt_max_complementarity=complementarity_violation(X_ipopt, self.pairs),
-            ipopt_max_bound_violation=bound_violation(X_ipopt), kkt_residual=kkt, polished=self.polish,
-            certificate_nodes=nodes, certificate_gap=gap,
-            seconds=time.perf_counter() - t0,
-        )
-
-    def _polish(self, G, C, const, X_prior, lam, X_ipopt):
-        """Certified global optimum of every example, starting from IPOPT's branch
-        (:func:`certified_examples`). Returns weights, max KKT residual, total nodes, max gap."""
-        return certified_examples(G, C, const, X_prior, lam, self.pairs, start=X_ipopt)
+        return WeightSolution(problem, X, polished=self.polish, seconds=time.perf_counter() - t0,
+                              ipopt_status=status, ipopt_iterations=iters, ipopt_success=ok, ipopt_X=X_ipopt,
+                              **info)
 
 
 def certified_examples(G, C, const, X_prior, lam, pairs, start=None, free=None):
     """Certified global optimum of eq. 5 for every example (they are independent given G).
 
-    :class:`~facebasis.rigging.certify.CertifiedWeightSolver` (branch and bound over the pairs,
-    exact box-QPs), set up once for the shared G, lambda and pairs, optionally seeded per example
-    with ``start`` (m, k). ``free`` (k,) bool: only these weights may be nonzero (the others are
-    fixed at 0, their pairs hold trivially). Returns (weights (m, k), max KKT residual, total
-    nodes, max gap); the objective's constants (prior of the fixed weights) do not change the optimum.
+    :func:`~facebasis.rigging.certify.certify_problem` on the :class:`WeightProblem` of the
+    arrays (C (k, m)), optionally seeded per example with ``start`` (m, k). ``free`` (k,) bool:
+    only these weights may be nonzero (the others are fixed at 0, their pairs hold trivially).
+    Returns (weights (m, k), max KKT residual, total nodes, max gap).
     """
-    k, m = C.shape
-    X = np.zeros((m, k))
-    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    idx = np.arange(k) if free is None else np.flatnonzero(free)
-    if len(idx) < k:
-        pos = np.full(k, -1)
-        pos[idx] = np.arange(len(idx))
-        P = pos[P[(pos[P] >= 0).all(axis=1)]] if len(P) else P
-        G, C = G[np.ix_(idx, idx)], C[idx]
-        X_prior = X_prior[:, idx]
-        start = None if start is None else start[:, idx]
-    kkt, nodes, gap = 0.0, 0, 0.0
-    if len(idx) == 0:
-        return X, kkt, nodes, gap
-    certifier = CertifiedWeightSolver(G, P, lam)  # shared by all examples of this step
-    for j in range(m):  # examples are independent given the blendshapes
-        cs = certifier.solve(C[:, j], const[j], X_prior[j], start=None if start is None else start[j])
-        X[j, idx] = cs.x
-        kkt, nodes, gap = max(kkt, cs.kkt_residual), nodes + cs.nodes, max(gap, cs.gap)
-    return X, kkt, nodes, gap
-
-
-#: ``WeightSolution.ipopt_status`` of a weight step that did not run IPOPT
-IPOPT_NOT_RUN = "not run"
+    sol = certify_problem(_problem(G, C, const, X_prior, lam, pairs), start=start, free=free)
+    return sol.X, sol.kkt_residual, sol.certificate_nodes, sol.certificate_gap
 
 
 def solve_certified(G, C, const, X_prior, lam: float, pairs=(), free=None) -> WeightSolution:
@@ -270,22 +193,8 @@ def solve_certified(G, C, const, X_prior, lam: float, pairs=(), free=None) -> We
     solution say so (status :data:`IPOPT_NOT_RUN`, 0 iterations, NaN objective and violations,
     ``ipopt_success`` True since nothing failed). ``free``: see :func:`certified_examples`.
     """
-    import time
+    return certify_problem(_problem(G, C, const, X_prior, lam, pairs), free=free)
 
-    t0 = time.perf_counter()
-    G, C = np.asarray(G, float), np.asarray(C, float)
-    X_prior, const = np.asarray(X_prior, float), np.asarray(const, float)
-    k, m = C.shape
-    if G.shape != (k, k) or X_prior.shape != (m, k) or const.shape != (m,):
-        raise InputError(f"weight step: expected G {(k, k)}, prior {(m, k)}, const {(m,)}, found "
-                         f"{G.shape}, {X_prior.shape}, {const.shape}")
-    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    X, kkt, nodes, gap = certified_examples(G, C, const, X_prior, lam, P, free=free)
-    nan = float("nan")
-    return WeightSolution(
-        weights=X, objective=eq5_objective(X, G, C, const, X_prior, lam), ipopt_status=IPOPT_NOT_RUN,
-        ipopt_iterations=0, ipopt_success=True, ipopt_weights=np.full_like(X, nan), ipopt_objective=nan,
-        max_complementarity=complementarity_violation(X, P), max_bound_violation=bound_violation(X),
-        ipopt_max_complementarity=nan, ipopt_max_bound_violation=nan, kkt_residual=kkt, polished=True,
-        certificate_nodes=nodes, certificate_gap=gap, seconds=time.perf_counter() - t0,
-    )
+
+__all__ = ["WeightSolver", "WeightSolution", "WeightProblem", "solve_certified", "certified_examples",
+           "eq5_objective", "gram_data", "IPOPT_OK", "IPOPT_NOT_RUN"]

@@ -44,6 +44,12 @@ DEFAULT_WINDOWS: dict[str, tuple[int, int]] = {
     "other": (15, 15),
 }
 
+#: iBUG-68 inner-lip points and the outer-lip point across the same lip (upper 61-63 -> 50-52, lower
+#: 65-67 -> 56-58). Closed lips put an upper and a lower inner point on the same pixel, so LK centred
+#: on the lip line moves both alike and the mouth never opens; by default they follow their outer-lip
+#: partner instead (:func:`lip_partners`, ``inner_lips`` of :class:`facebasis.capture.tracker.TrackerOptions`).
+INNER_LIP_PARTNERS: dict[int, int] = {61: 50, 62: 51, 63: 52, 65: 56, 66: 57, 67: 58}
+
 #: Face width (pixels) at which :data:`DEFAULT_WINDOWS` apply unscaled.
 REFERENCE_FACE_WIDTH = 150.0
 
@@ -82,6 +88,15 @@ def lk_windows(landmarks: np.ndarray, windows: dict | None = None) -> np.ndarray
     base = np.array([win[str(lab)] for lab in labels], float)  # L entries, a lookup not a loop over pixels
     out = np.maximum(np.round(base * s).astype(int) | 1, 5)
     return out
+
+
+def lip_partners(n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """(inner, partner): index arrays (P,) of the inner-lip points and of their outer-lip partners
+    across the same lip (:data:`INNER_LIP_PARTNERS`); empty unless ``n_points == 68``."""
+    if n_points != 68:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    inner = np.array(sorted(INNER_LIP_PARTNERS), np.int64)
+    return inner, np.array([INNER_LIP_PARTNERS[i] for i in inner], np.int64)
 
 
 def _fail(path, msg):

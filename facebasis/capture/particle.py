@@ -156,6 +156,14 @@ class CondensationFilter:
         self.velocity = np.zeros_like(lm)
         self.was_lost = np.zeros(self.L, bool)
 
+    def place(self, idx: np.ndarray, points: np.ndarray) -> None:
+        """Put landmarks ``idx`` (P,) at ``points`` (P, 2): their particles are moved by the same
+        shift and their velocity is kept, so a caller that places points by a model (the inner lips
+        of :class:`facebasis.capture.tracker.FaceTracker`) keeps the filter consistent."""
+        shift = np.asarray(points, float) - self.estimate[idx]
+        self.particles[idx] += shift[:, None, :]
+        self.estimate[idx] = points
+
     def appearance(self, image: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """Best NCC of the patches at ``pts (L, ..., 2)`` against the two templates -> ``(L, ...)``."""
         patches = sample(image, pts[..., None, :] + self.offsets)

@@ -20,7 +20,21 @@ from facebasis.errors import InputError
 
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
-from .landmarks import face_scale, lk_windows, read_landmarks, validate_landmarks
+from .landmarks import (
+    face_scale,
+    lip_partners,
+    lk_windows,
+    read_landmarks,
+    validate_landmarks,
+)
+from .lips import (
+    INNER_LIPS,
+    LIP_RENEW,
+    _from_complex,
+    _to_complex,
+    follow_outer_lip,
+    similarity_factor,
+)
 from .lk import build_pyramid, lk_track
 from .meshtrack import MeshOptions, MeshRefiner, prepare_image
 from .particle import CondensationFilter, FilterOptions
@@ -47,6 +61,16 @@ class TrackerOptions:
     windows : dict or None
         Per-region LK windows ``{region: (width, height)}`` overriding
         :data:`facebasis.capture.landmarks.DEFAULT_WINDOWS`.
+    inner_lips : str
+        ``"follow"`` (default): the inner-lip points of a 68-point iBUG set (61-63, 65-67) follow
+        their outer-lip partner across the same lip (50-52, 56-58),
+        ``p_inner = p_outer + a o``, with ``o`` the lip-thickness offset of the first frame and
+        ``a`` the complex factor (rotation and scale) of the least-squares similarity of the outer
+        lip (48-59) from the first frame, see :func:`follow_outer_lip`. In detector mode each
+        detection's own offset (inner minus partner, brought back by ``a``) renews ``o``
+        (exponential average, :data:`LIP_RENEW`). ``"track"``: LK and the filter on the lip line
+        itself (the earlier behaviour): closed lips put an upper and a lower point on one patch, so
+        they move alike and the mouth does not open (reports/reproduction/real_clips_notes.md).
     filter : FilterOptions
     mesh : MeshOptions
     """
@@ -57,6 +81,7 @@ class TrackerOptions:
     lk_levels: int = 3
     fb_threshold: float = 1.0
     windows: dict | None = None
+    inner_lips: str = "follow"
     filter: FilterOptions = field(default_factory=FilterOptions)
     mesh: MeshOptions = field(default_factory=MeshOptions)
 
@@ -99,6 +124,8 @@ class FaceTracker:
 
     def __init__(self, first_frame: np.ndarray, landmarks: np.ndarray, options: TrackerOptions = TrackerOptions()):
         self.opt = options
+        if options.inner_lips not in INNER_LIPS:
+            raise InputError(f"inner_lips: expected one of {', '.join(INNER_LIPS)}, found {options.inner_lips!r}")
         gray = to_gray(first_frame)
         h, w = gray.shape
         lm = validate_landmarks(landmarks, "landmarks", size=(w, h))
@@ -113,6 +140,9 @@ class FaceTracker:
         held = np.zeros(len(self.mesh.vertices), bool)
         held[:L] = True
         self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh)
+        self._inner, self._partner = lip_partners(L) if options.inner_lips == "follow" else (np.zeros(0, np.int64),) * 2
+        self._outer0 = lm[48:60].copy() if len(self._inner) else None    # outer lip of frame 0
+        self._offset = lm[self._inner] - lm[self._partner]              # lip thickness, frame 0's axes
         self.filter = CondensationFilter(gray, lm, self.scale, options.filter) if options.use_filter else None
         self._pyr = build_pyramid(_u8(gray), self._maxwin, options.lk_levels)
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
@@ -120,6 +150,23 @@ class FaceTracker:
         self._V = self.mesh.vertices.copy()
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
+
+    def _follow_lips(self, lm: np.ndarray, detections: np.ndarray | None) -> np.ndarray:
+        """Place the inner-lip points on their outer-lip partners (``inner_lips="follow"``)."""
+        if not len(self._inner):
+            return lm
+        a = similarity_factor(self._outer0, lm[48:60])
+        if detections is not None:
+            det = np.asarray(detections, float)
+            d = det[self._inner] - det[self._partner]
+            ok = np.all(np.isfinite(d), axis=1)
+            seen = _from_complex(_to_complex(d) / a)                     # back in frame 0's axes
+            self._offset[ok] = (1.0 - LIP_RENEW) * self._offset[ok] + LIP_RENEW * seen[ok]
+        out = lm.copy()
+        out[self._inner] = follow_outer_lip(lm[self._partner], self._offset, a)
+        if self.filter is not None:
+            self.filter.place(self._inner, out[self._inner])
+        return out
 
     def track(self, frame: np.ndarray, detections: np.ndarray | None = None) -> FrameResult:
         """Track the next frame.
@@ -144,10 +191,14 @@ class FaceTracker:
         lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
                       self.opt.fb_threshold * self.scale)
         if self.filter is not None:
-            lm, lost = self.filter.step(gray, lk.points, lk.ok, detections)
+            ok = lk.ok.copy()
+            ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
+            lm, lost = self.filter.step(gray, lk.points, ok, detections)
         else:
             lm, lost = lk.points, ~lk.ok
-        lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])
+        lost = np.asarray(lost, bool).copy()
+        lost[self._inner] = lost[self._partner]
+        lm = np.clip(self._follow_lips(lm, detections), 0, [self.size[0] - 1, self.size[1] - 1])
         t1 = time.perf_counter()
         # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
         V_init = self._V + self.harmonic.solve(lm - self._lm)

@@ -43,6 +43,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-overlay", action="store_true", help="do not write overlay.mp4")
     p.add_argument("--fps", type=float, default=None, metavar="F",
                    help="frame rate of an image folder (default 25)")
+    p.add_argument("--inner-lips", default="follow", metavar="follow|track",
+                   help="inner-lip points of a 68-point iBUG set: 'follow' (default) moves them with the outer "
+                        "lip across the same lip, keeping the first frame's lip thickness (renewed from the "
+                        "detections with --detector), since closed lips put an upper and a lower point on one "
+                        "patch that LK cannot split; 'track' tracks the lip line itself (the mouth may not open)")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     p.set_defaults(func=cmd_capture)
     return p
@@ -52,8 +57,16 @@ def cmd_capture(args) -> int:
     """Run ``facebasis capture``; every user error is raised as a FacebasisError before work starts."""
     from tqdm import tqdm
 
-    from facebasis.capture.tracker import capture, check_capture_args
+    from facebasis.capture.tracker import (
+        INNER_LIPS,
+        TrackerOptions,
+        capture,
+        check_capture_args,
+    )
+    from facebasis.errors import InputError
 
+    if args.inner_lips not in INNER_LIPS:
+        raise InputError(f"--inner-lips: expected one of {', '.join(INNER_LIPS)}, found {args.inner_lips!r}")
     max_frames = None if args.max_frames is None else _positive_int(args.max_frames)
     src, lm, det = check_capture_args(args.input, args.landmarks, args.detector, args.out, max_frames, args.fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
@@ -65,7 +78,8 @@ def cmd_capture(args) -> int:
 
     try:
         res = capture(src, landmarks=lm, detector=det, out=args.out, max_frames=max_frames,
-                      overlay=not args.no_overlay, progress=progress)
+                      overlay=not args.no_overlay, progress=progress,
+                      options=TrackerOptions(inner_lips=args.inner_lips))
     finally:
         if bar is not None:
             bar.close()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from conftest import grid_sheet
-from facebasis.contact.exact import contact_transfer
+from facebasis.contact.exact import contact_correct, contact_transfer
 from facebasis.contact.penetration import intersecting_pairs, penetration_report, triangle_pairs_intersect
 from facebasis.contact.proximity import candidate_pairs, new_pairs, triangle_distance
 from facebasis.errors import InputError
@@ -82,6 +82,75 @@ def test_a_folded_strip_pressed_through_itself_stays_apart():
     top = layer == 2
     gap = (target + res.rig.deltas[0])[top, 2].min()
     assert gap < 0.25
+
+
+def _rot_y(P, hinge, angle):
+    """P (p, 3) rotated by ``angle`` about the line x = hinge, z = 0 (along y)."""
+    c, s = np.cos(angle), np.sin(angle)
+    Q = P.copy()
+    x, z = P[:, 0] - hinge, P[:, 2]
+    Q[:, 0] = hinge + c * x - s * z
+    Q[:, 2] = s * x + c * z
+    return Q
+
+
+def hinge_strip(pre=0.5, fold=2.7, hinge=2.2):
+    """One strip (x in [0, 4]) whose flap beyond x = hinge folds up and back over the strip by ``fold``
+    radians in the template shape (apart: 2.7 < pi); the target neutral has the flap already bent up by
+    ``pre``, so the transferred rotation (pre + fold > pi) folds the flap through the strip itself."""
+    V, F = grid_sheet(25, 5, size=4.0)
+    V[:, 2] = 0.003 * np.sin(2.3 * V[:, 0] + 0.4) * np.cos(1.9 * V[:, 1])  # not coplanar: fast exact tests
+    flap = V[:, 0] > hinge + 1e-9
+    S, B0 = V.copy(), V.copy()
+    S[flap] = _rot_y(V[flap], hinge, fold)
+    B0[flap] = _rot_y(V[flap], hinge, pre)
+    return Rig(V, F, ("fold",), (S - V)[None]), B0, flap
+
+
+def test_a_fold_of_one_strip_is_prevented():
+    rig, target, flap = hinge_strip()
+    S = rig.neutral + rig.deltas[0]
+    assert len(intersecting_pairs(S, rig.faces)) == 0 and len(intersecting_pairs(target, rig.faces)) == 0
+    plain = DeformationTransfer(rig, target).transfer()
+    rep = penetration_report(target + plain.deltas[0], rig.faces, references=(target, S))
+    assert len(rep.new) > 0  # plain transfer folds the flap through the strip
+    res = contact_transfer(rig, target)
+    X = target + res.rig.deltas[0]
+    assert res.ok and len(penetration_report(X, rig.faces, references=(target, S)).new) == 0
+    shape = res.shapes[0]
+    assert shape.plain_new_pairs == len(rep.new) and shape.iterations >= 1 and shape.min_distance > 0
+    # the flap still folds back over the strip (its tip above it, beyond the hinge's other side) ...
+    tip = flap & (rig.neutral[:, 0] > 3.9)
+    assert np.all(X[tip, 2] > 0.0) and np.all(X[tip, 0] < 1.0)
+    assert np.all((target + plain.deltas[0])[tip, 2] < 0.0)
+    # ... and the far end of the strip keeps the plain motion exactly
+    far = rig.neutral[:, 0] < 0.8
+    assert np.array_equal(res.rig.deltas[0][far], plain.deltas[0][far])
+
+
+def test_generated_shapes_are_corrected_by_the_smallest_displacement():
+    """``contact_correct`` (``rig --contact``): shapes made otherwise stay apart, far vertices keep their
+    delta exactly, an excluded shape is returned as given; bad input is refused."""
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    made = DeformationTransfer(rig, target).transfer()  # stands in for generated shapes
+    made = Rig(made.neutral, made.faces, made.names, made.deltas * np.array([1.2, 1.0])[:, None, None])
+    res = contact_correct(made, rig, reach=0.5)
+    assert res.ok and res.plain is made
+    assert new_count(rig, target, res.rig.deltas, res.rig.names) == [0, 0]
+    assert new_count(rig, target, made.deltas, made.names)[0] > 0
+    far = np.flatnonzero(target[:, 0] > 2.6)
+    assert np.array_equal(res.rig.deltas[0][far], made.deltas[0][far])
+    # the smallest displacement moves less, in vertex positions, than the transfer energy's correction
+    smooth = contact_correct(made, rig, reach=0.5, stiffness=0.0)
+    assert smooth.ok
+    assert np.linalg.norm(res.rig.deltas[0] - made.deltas[0]) < np.linalg.norm(smooth.rig.deltas[0] - made.deltas[0])
+    ex = contact_correct(made, rig, exclude="push")
+    assert ex.shapes[0].excluded and np.array_equal(ex.rig.deltas[0], made.deltas[0])
+    with pytest.raises(InputError, match=r"contact exclude: expected shape names of the rig .*found unknown 'pull'"):
+        contact_correct(made, rig, exclude=["pull"])
+    with pytest.raises(InputError, match=r"contact: expected a mesh of at most 50 vertices .*found 210"):
+        contact_correct(made, rig, max_vertices=50)
 
 
 def test_template_pairs_stay_allowed_and_excluded_shapes_are_plain():
@@ -208,6 +277,8 @@ def test_rig_cli_contact_generated_shapes_have_no_new_pairs(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0, out
     assert "exact check: no generated shape" in out
+    # per shape: solve-and-check rounds, solver iterations and the smallest distance kept
+    assert "rounds" in out and "QP it" in out and "min dist" in out
     template = load_rig_folder(root / "template")
     gen = load_rig_folder(tmp_path / "run")
     assert set(gen.names) == set(template.names)
@@ -219,3 +290,33 @@ def test_rig_cli_contact_generated_shapes_have_no_new_pairs(tmp_path, capsys):
     # the stored weights are the certified optimum for the corrected blendshapes actually written
     assert main(["verify", str(tmp_path / "run")]) == 0
     assert "certified optimal" in capsys.readouterr().out
+
+
+def test_rig_cli_contact_bad_inputs(tmp_path, capsys, monkeypatch):
+    """``rig --contact`` refuses, before any solving, a target neutral intersecting itself where the
+    template does not (naming the pairs) and a mesh too large for the time budget."""
+    import facebasis.contact.exact as exact
+    from conftest import write_rig_inputs
+    from facebasis.cli import main
+    from facebasis.geometry.meshio import write_mesh
+    from facebasis.rigging.synthetic import default_face_problem
+
+    pp = default_face_problem(seed=0, n_train=6)
+    root = write_rig_inputs(tmp_path, pp)
+    # the jaw closed beyond the neutral pushes the lower lip through the upper one
+    jaw = pp.truth.deltas[pp.truth.names.index("jawOpen")]
+    write_mesh(root / "closed.obj", pp.problem.target_neutral - 0.5 * jaw, pp.problem.template.faces)
+    base = ["rig", "--template", str(root / "template"), "--examples", str(root / "examples"), "--weights",
+            str(root / "weights.json"), "--iterations", "1", "--out", str(tmp_path / "out")]
+    assert main(base + ["--target", str(root / "closed.obj"), "--contact"]) == 2
+    err = capsys.readouterr().err
+    assert "closed.obj: expected no intersecting triangle pairs beyond the template neutral's, found" in err
+    assert "(triangles (" in err and "--contact-allow-target-pairs" in err
+    assert main(base + ["--target", str(root / "target.obj"), "--contact-allow-target-pairs"]) == 2
+    assert "expected --contact as well" in capsys.readouterr().err
+    monkeypatch.setattr(exact, "MAX_VERTICES", 1000)
+    assert main(base + ["--target", str(root / "target.obj"), "--contact"]) == 2
+    err = capsys.readouterr().err
+    assert "--contact: expected a mesh of at most 1000 vertices for the time budget" in err
+    assert f"found {pp.problem.template.n_vertices}; run without --contact" in err
+    assert not (tmp_path / "out").exists()

@@ -107,7 +107,7 @@ def cmd_rig(args) -> int:
     from ..rigging.runs import write_rig_run
 
     if args.resume is not None:
-        if args.contact or args.contact_exclude:
+        if args.contact or args.contact_exclude or args.contact_allow_target_pairs:
             raise InputError("--contact with --resume: expected a fresh run (contact is not stored in a run "
                              "to resume), found --resume")
         return _cmd_rig_resume(args)
@@ -116,24 +116,18 @@ def cmd_rig(args) -> int:
     if absent:
         raise InputError(f"rig: expected {', '.join(absent)} (or --resume RUN_DIR), found none")
     # everything is validated before any solving starts
-    if not args.contact and args.contact_exclude:
-        raise InputError("--contact-exclude: expected --contact as well, found none")
+    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
+        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
     options = _rig_options(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact_exclude:
         template.index(args.contact_exclude, what="--contact-exclude")
     if args.contact:
-        from ..contact.exact import MAX_VERTICES
-        from ..contact.proximity import new_pairs
+        from ..contact.exact import check_size, check_target_neutral
 
-        if template.n_vertices > MAX_VERTICES:
-            raise InputError(f"--contact: expected a mesh of at most {MAX_VERTICES} vertices for the time budget, "
-                             f"found {template.n_vertices}")
-        bad = new_pairs(target, template.faces, (template.neutral,))
-        if len(bad):
-            raise InputError(f"--contact: expected a target neutral with no intersecting triangle pairs beyond the "
-                             f"template neutral's, found {len(bad)}; fix the mesh or generate without --contact")
+        check_size(template.n_vertices, what="--contact")
+        check_target_neutral(target, template, args.contact_allow_target_pairs, what=f"--contact: {args.target}")
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
     ve = virtual_edges_for(args, template)
@@ -164,7 +158,7 @@ def cmd_rig(args) -> int:
               f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {min(cv.errors):.4f})")
     contact = None
     if args.contact:
-        contact, result = _contact_generation(gen, result, args.contact_exclude)
+        contact, result = _contact_generation(gen, result, args.contact_exclude, args.contact_allow_target_pairs)
     sources = {"template": args.template, "neutral": args.neutral, "exclude": list(args.exclude),
                "target": args.target}
     with atomic_directory(args.out) as stage:
@@ -190,20 +184,21 @@ def _contact_verdict(contact, what: str, excluded) -> int:
     return 0
 
 
-def _contact_generation(gen, result, exclude):
-    """Exact contact on the generated rig: each shape moved least in the generator's transfer energy
-    (virtual edges included) so that no new triangle pair intersects (see
-    :func:`facebasis.contact.exact.contact_correct`); the training residuals are recomputed."""
+def _contact_generation(gen, result, exclude, allow_target_pairs=False):
+    """Exact contact on the generated rig: each shape moved by the smallest displacement (smoothed by
+    the generator's transfer energy, virtual edges included) so that no new triangle pair intersects
+    (see :func:`facebasis.contact.exact.contact_correct`); the final weight step is solved again for
+    the corrected shapes and the training residuals recomputed."""
     import dataclasses
 
     import numpy as np
 
     from ..contact.exact import contact_correct
     from ..rigging.generation import relative_residuals
-
     from ..rigging.weights import gram_data, solve_certified
 
-    contact = contact_correct(result.rig, gen.problem.template, transfer=gen.dt, exclude=exclude)
+    contact = contact_correct(result.rig, gen.problem.template, transfer=gen.dt, exclude=exclude,
+                              allow_target_pairs=allow_target_pairs)
     # the stored weights must be the certified optimum for the blendshapes actually written (so that
     # `facebasis verify` certifies the run): one more eq. 5 step, at the run's final lambda
     G, C, const = gram_data(contact.rig, gen.problem.examples)
@@ -345,11 +340,16 @@ def register(sub) -> None:
                         "over the training expressions (curve in crossval.json)")
     p.add_argument("--lambda", dest="lam", default=None, help=f"lambda schedule FIRST,LAST (default {lam})")
     p.add_argument("--contact", action="store_true",
-                   help="exact contact: after generation, move each generated shape least (deformation-transfer "
-                        "energy) so that no triangle pair intersects that does not intersect in the target neutral "
-                        "or in the template shape; checked exactly (exit status 1 if a shape keeps a new pair)")
+                   help="exact contact: after generation, move each generated shape by the smallest displacement "
+                        "(smoothed by the transfer energy) so that no triangle pair intersects that does not intersect "
+                        "in the target neutral or in the template shape, then solve the final weight step again; "
+                        "checked exactly after every solve (exit status 1 if a shape keeps a new pair)")
     p.add_argument("--contact-exclude", action="extend", nargs="+", default=[], metavar="SHAPE",
-                   help="with --contact: shapes left as generated, e.g. correctives meant to press layers together")
+                   help="with --contact: shapes left as generated, e.g. correctives meant to press layers together "
+                        "(several after one flag or repeated)")
+    p.add_argument("--contact-allow-target-pairs", action="store_true",
+                   help="with --contact: accept a target neutral that intersects itself where the template does "
+                        "not (those pairs stay allowed); without it that is an error naming the pairs")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")

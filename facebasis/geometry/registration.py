@@ -20,6 +20,7 @@ CVPR 2007.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass, field
@@ -45,12 +46,16 @@ class RegistrationOptions:
     Attributes
     ----------
     rigid : the similarity alignment's options
-    nricp : the non-rigid ICP's stiffness schedule and correspondence rules
+    nricp : the non-rigid ICP's stiffness schedule and correspondence rules from the template (another
+        person: local similarities, since faces differ in local size, not only in shape)
+    nricp_from_start : the same from a given start mesh (the person's registered neutral: local
+        rotations, as skin moving over the same face stretches little)
     unit_ratio : refuse scans whose size differs from the template's by more than this factor
     """
 
     rigid: RigidOptions = field(default_factory=RigidOptions)
-    nricp: NricpOptions = field(default_factory=NricpOptions)
+    nricp: NricpOptions = field(default_factory=lambda: NricpOptions(local_scale=True))
+    nricp_from_start: NricpOptions = field(default_factory=NricpOptions)
     unit_ratio: float = UNIT_RATIO
 
 
@@ -230,17 +235,20 @@ class Registration:
                 raise InputError(f"{name}: start mesh: expected {len(self.V)} vertices, found {len(P)}")
         t0 = time.perf_counter()
         # rigid stage: in the scan's frame
-        guess = umeyama(P[self.landmarks], lm_pts) if lm_pts is not None else None
-        sim, score = align_similarity(P, self.F, V, F, self.options.rigid, start=guess)
+        # from the person's registered neutral (same scanner, same units): a rigid motion, no scale
+        rigid = self.options.rigid if start is None else dataclasses.replace(self.options.rigid, scale=False)
+        guess = umeyama(P[self.landmarks], lm_pts, scale=rigid.scale) if lm_pts is not None else None
+        sim, score = align_similarity(P, self.F, V, F, rigid, start=guess)
         surface = ScanSurface(V, F)
-        rng = np.random.default_rng(self.options.rigid.seed)
+        rng = np.random.default_rng(rigid.seed)
         sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
-        sim, score = refine_point_to_plane(sub, surface.closest, sim, keep=self.options.rigid.keep_template)
+        sim, score = refine_point_to_plane(sub, surface.closest, sim, keep=rigid.keep_template, scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
         inv = sim.inverse()
-        surface_t = ScanSurface(inv.apply(V), F)
+        surface_t = surface.moved(inv.apply(V))
         lm_t = inv.apply(lm_pts) if lm_pts is not None else None
-        res = self.nricp.fit(P, surface_t, self.options.nricp, self.landmarks if lm_pts is not None else None,
+        opts = self.options.nricp if start is None else self.options.nricp_from_start
+        res = self.nricp.fit(P, surface_t, opts, self.landmarks if lm_pts is not None else None,
                              lm_t, h=median_edge_length(P, self.F))
         X = sim.apply(res.vertices)
         lm_err = np.linalg.norm(X[self.landmarks] - lm_pts, axis=1) if lm_pts is not None else None

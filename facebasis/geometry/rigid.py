@@ -74,15 +74,17 @@ class RigidOptions:
     keep_template : fraction of template-to-scan pairs kept (the template covers parts a scan lacks)
     keep_scan : fraction of scan-to-template pairs kept (noise, stray parts of the scan)
     seed : seed of the point sampling
+    scale : estimate the scale (else a rigid motion: e.g. the same person's scans from one scanner)
     """
 
     samples: int = 1500
-    candidate_iterations: int = 8
+    candidate_iterations: int = 5
     refine_candidates: int = 2
-    refine_iterations: int = 20
+    refine_iterations: int = 8
     keep_template: float = 0.6
     keep_scan: float = 0.9
     seed: int = 0
+    scale: bool = True
 
 
 def umeyama(A: np.ndarray, B: np.ndarray, scale: bool = True) -> Similarity:
@@ -176,7 +178,7 @@ def trimmed_icp(T_pts: np.ndarray, S_pts: np.ndarray, S_tree: cKDTree, sim: Simi
             break
         A = np.concatenate([T_pts[k1], T_tree_pts[j2[k2]]])
         B = np.concatenate([S_pts[j1[k1]], scan_q[k2]])
-        sim = umeyama(A, B)
+        sim = umeyama(A, B, scale=options.scale)
     return sim, score
 
 
@@ -212,7 +214,7 @@ def align_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.
     results = []
     for G in _cube_rotations():  # 24 candidate orientations (loop over candidates, not points)
         R = As @ G @ At.T
-        s = rs / rt
+        s = rs / rt if options.scale else 1.0
         sim0 = Similarity(s, R, cs - s * R @ ct)
         sim, score = trimmed_icp(T_s, S_s, S_s_tree, sim0, options.candidate_iterations, options)
         results.append((score, sim))
@@ -237,7 +239,8 @@ def _rotation_from_vector(w: np.ndarray) -> np.ndarray:
 
 
 def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iterations: int = 15,
-                          keep: float = 0.6, tolerance: float = 1e-7) -> tuple[Similarity, float]:
+                          keep: float = 0.6, tolerance: float = 1e-7, scale: bool = True
+                          ) -> tuple[Similarity, float]:
     """Trimmed point-to-plane ICP with scale, against the scan's exact closest surface points.
 
     Each step linearises ``x -> c + (1 + d)(I + [w]x)(x - c) + t`` about the template points'
@@ -249,6 +252,7 @@ def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iteration
     T_pts : (p, 3) template points
     closest : callable ``P (p, 3) -> (Q (p, 3), normals (p, 3), dist (p,), rim (p,) bool)``
     sim : start similarity (template -> scan)
+    scale : also refine the scale (else only the rotation and translation: 6 x 6 equations)
 
     Returns
     -------
@@ -267,11 +271,13 @@ def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iteration
         c = X[idx].mean(0)
         y, n = X[idx] - c, N[idx]
         J = np.concatenate([np.cross(y, n), n, (y * n).sum(1, keepdims=True)], 1)  # (k, 7): w, t, d
+        if not scale:
+            J = J[:, :6]
         rms = float(np.sqrt(np.mean(r0[idx] ** 2))) / sim.scale
         H = J.T @ J
-        x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(7), -J.T @ r0[idx])
+        x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(len(H)), -J.T @ r0[idx])
         R = _rotation_from_vector(x[:3])
-        s = 1.0 + x[6]
+        s = 1.0 + x[6] if scale else 1.0
         sim = sim.then(Similarity(s, R, c - s * R @ c + x[3:6]))
         if np.abs(x).max() < tolerance:
             break

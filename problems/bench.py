@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,rig-scale,weights,virtual,cli,all} [--repeat N]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,rig-scale,weights,virtual,cli,all} [--repeat N] [--m M ...]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -253,7 +253,7 @@ def bench_virtual(repeat: int) -> dict:
     return results
 
 
-def bench_rig_scale(repeat: int) -> dict:
+def bench_rig_scale(repeat: int, ms=(20, 40, 80, 160)) -> dict:
     """Seconds of a full generation (precompute + 10 alternations) against the number of training
     expressions, wall and CPU, with the machine's load (other processes share the cores)."""
     import numpy as np
@@ -267,7 +267,7 @@ def bench_rig_scale(repeat: int) -> dict:
     print(f"  {'m':>4s} {'wall s':>7s} {'CPU s':>7s} {'target':>7s} {'precompute':>10s} {'basis+rec':>9s} "
           f"{'weights':>8s} {'form':>9s}  load")
     out = {}
-    for m in (20, 40, 80, 160):
+    for m in ms:
         pp = ict_person_problem(seed=0, n_train=m)
         walls, cpus = [], []
         for _ in range(max(1, repeat)):
@@ -303,6 +303,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m problems.bench")
     parser.add_argument("which", nargs="?", default="all", choices=sorted(BENCHES) + ["all"])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--m", type=int, nargs="+", default=[20, 40, 80, 160], metavar="M",
+                        help="rig-scale: the numbers of training expressions to time")
     parser.add_argument("--facex", default=None, metavar="DIR",
                         help="cli: also time ICT-FaceKit's raw FaceXModel folder (as it ships) onto identity003")
     args = parser.parse_args(argv)
@@ -315,6 +317,8 @@ def main(argv=None) -> int:
     for name in (sorted(BENCHES) if args.which == "all" else [args.which]):
         if name == "cli":
             bench_cli(args.repeat, args.facex)
+        elif name == "rig-scale":
+            bench_rig_scale(args.repeat, tuple(args.m))
         else:
             BENCHES[name](args.repeat)
     return 0

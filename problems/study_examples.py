@@ -1,7 +1,7 @@
 """Study: held-out error against the number of training expressions (ICT person problems).
 
 ``python -m problems.study_examples [--m 10 20 40 80 160] [--seeds 0 1 2] [--out reports/examples_study]
-[--grid A ...] [--redo]``
+[--grid A ...] [--redo] [--methods METHOD ...] [--candidates path|cold]``
 
 For every (m, seed): template deltas, deformation transfer, example-based generation with the
 paper's schedule (unobserved shapes fitted, the paper; and kept at their transfer, the default),
@@ -32,7 +32,7 @@ METHODS = ("template deltas", "deformation transfer", "paper (unobserved fitted)
            "alpha auto", "oracle (true weights)")
 
 
-def run_case(m: int, seed: int, grid: tuple[float, ...] = ()) -> list[dict]:
+def run_case(m: int, seed: int, grid: tuple[float, ...] = (), methods=METHODS, candidates: str = "path") -> list[dict]:
     from facebasis.geometry.transfer import deformation_transfer
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
@@ -64,23 +64,31 @@ def run_case(m: int, seed: int, grid: tuple[float, ...] = ()) -> list[dict]:
         out = fn()
         return out, time.perf_counter() - t0, time.process_time() - c0
 
-    tpl = p.template.with_neutral(p.target_neutral, p.template.deltas)
-    score("template deltas", tpl, 0.0, 0.0)
-    dt, s, c = timed(lambda: deformation_transfer(p.template, p.target_neutral))
-    score("deformation transfer", dt, s, c)
+    if "template deltas" in methods:
+        tpl = p.template.with_neutral(p.target_neutral, p.template.deltas)
+        score("template deltas", tpl, 0.0, 0.0)
+    if "deformation transfer" in methods:
+        dt, s, c = timed(lambda: deformation_transfer(p.template, p.target_neutral))
+        score("deformation transfer", dt, s, c)
     base = GenerationOptions(ipopt="never")
-    res, s, c = timed(lambda: BlendshapeGenerator(p, dataclasses.replace(base, unobserved="fit")).run())
-    score("paper (unobserved fitted)", res.rig, s, c, res.weights)
-    res, s, c = timed(lambda: BlendshapeGenerator(p, base).run())
-    score("paper (unobserved kept)", res.rig, s, c, res.weights, {"unobserved": list(res.unobserved)})
-    res, s, c = timed(lambda: BlendshapeGenerator(p, dataclasses.replace(base, alpha="auto", cv_grid=grid)).run())
-    cv = res.crossval
-    score("alpha auto", res.rig, s, c, res.weights,
-          {"best_alpha": cv.best_alpha, "cv_seconds": cv.seconds, "cv_cpu_seconds": cv.cpu_seconds,
-           "cv_grid": list(cv.grid), "cv_errors": list(cv.errors)})
-    oracle = dataclasses.replace(p, initial_weights=pp.true_weights)
-    res, s, c = timed(lambda: BlendshapeGenerator(oracle, dataclasses.replace(base, lam=(1e8, 1e8))).run())
-    score("oracle (true weights)", res.rig, s, c, res.weights)
+    if "paper (unobserved fitted)" in methods:
+        res, s, c = timed(lambda: BlendshapeGenerator(p, dataclasses.replace(base, unobserved="fit")).run())
+        score("paper (unobserved fitted)", res.rig, s, c, res.weights)
+    if "paper (unobserved kept)" in methods:
+        res, s, c = timed(lambda: BlendshapeGenerator(p, base).run())
+        score("paper (unobserved kept)", res.rig, s, c, res.weights, {"unobserved": list(res.unobserved)})
+    if "alpha auto" in methods:
+        auto = dataclasses.replace(base, alpha="auto", cv_grid=grid, cv_candidates=candidates)
+        res, s, c = timed(lambda: BlendshapeGenerator(p, auto).run())
+        cv = res.crossval
+        score("alpha auto", res.rig, s, c, res.weights,
+              {"best_alpha": cv.best_alpha, "cv_seconds": cv.seconds, "cv_cpu_seconds": cv.cpu_seconds,
+               "cv_grid": list(cv.grid), "cv_errors": list(cv.errors), "cv_candidates": cv.candidates,
+               "final_alternations": len(res.history)})
+    if "oracle (true weights)" in methods:
+        oracle = dataclasses.replace(p, initial_weights=pp.true_weights)
+        res, s, c = timed(lambda: BlendshapeGenerator(oracle, dataclasses.replace(base, lam=(1e8, 1e8))).run())
+        score("oracle (true weights)", res.rig, s, c, res.weights)
     return rows
 
 
@@ -100,13 +108,13 @@ def load_rows(out: Path) -> list[dict]:
 
 
 def merge_rows(out: Path, new: list[dict]) -> list[dict]:
-    """Merge ``new`` (whole cases) into ``out/rows.json`` under the lock (the case's old rows
-    replaced), write it atomically, and return all rows."""
+    """Merge ``new`` rows into ``out/rows.json`` under the lock (the old rows of the same case and
+    method replaced), write it atomically, and return all rows."""
     from facebasis.atomic import atomic_write_bytes
 
-    cases = {(r["m"], r["seed"]) for r in new}
+    cases = {(r["m"], r["seed"], r["method"]) for r in new}
     with _locked(out):
-        rows = [r for r in load_rows(out) if (r["m"], r["seed"]) not in cases] + list(new)
+        rows = [r for r in load_rows(out) if (r["m"], r["seed"], r["method"]) not in cases] + list(new)
         rows.sort(key=lambda r: (r["m"], r["seed"], METHODS.index(r["method"])))
         atomic_write_bytes(out / "rows.json", json.dumps(rows, indent=1).encode())
         summarise(rows, out)
@@ -140,7 +148,10 @@ def summarise(rows, out: Path) -> None:
                 continue
             a, d, t = get["alpha auto"]["heldout"], get["deformation transfer"]["heldout"], get["template deltas"]["heldout"]
             lines.append(f"- m = {m}, seed {seed}: auto/DT = {a / d:.3f}, auto <= min(DT, template) "
-                         f"{'yes' if a <= min(d, t) else 'NO'}; chosen alpha {get['alpha auto']['best_alpha']:g}; "
+                         f"{'yes' if a <= min(d, t) else 'NO'}; chosen alpha {get['alpha auto']['best_alpha']:g}"
+                         f" ({get['alpha auto'].get('cv_candidates', 'path scored, fresh schedule returned (before the fix)')}"
+                         + (f", {get['alpha auto']['final_alternations']} final alternations"
+                            if "final_alternations" in get["alpha auto"] else "") + "); "
                          f"(grid {min(get['alpha auto']['cv_grid']):g} .. {max(get['alpha auto']['cv_grid']):g}); "
                          f"cross-validation {get['alpha auto']['cv_seconds']:.1f} s wall, "
                          f"{get['alpha auto']['cv_cpu_seconds']:.1f} s CPU; paper run "
@@ -198,6 +209,10 @@ def main(argv=None) -> int:
     ap.add_argument("--grid", type=float, nargs="+", default=[],
                     help="candidate final alphas of alpha auto (default: the library's default grid)")
     ap.add_argument("--redo", action="store_true", help="recompute cases already in rows.json")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS, metavar="METHOD",
+                    help="only these methods (their rows replaced; the others of the case kept)")
+    ap.add_argument("--candidates", default="path", choices=("path", "cold"),
+                    help="cross-validation candidates of alpha auto (GenerationOptions.cv_candidates)")
     args = ap.parse_args(argv)
     from problems.ict import ict_available, ict_path
 
@@ -209,10 +224,10 @@ def main(argv=None) -> int:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     for m in args.m:
         for seed in args.seeds:
-            done = {(r["m"], r["seed"]) for r in load_rows(out) if r["method"] == METHODS[-1]}
+            done = {(r["m"], r["seed"]) for r in load_rows(out) if r["method"] == args.methods[-1]}
             if (m, seed) in done and not args.redo:
                 continue
-            merge_rows(out, run_case(m, seed, tuple(args.grid)))
+            merge_rows(out, run_case(m, seed, tuple(args.grid), tuple(args.methods), args.candidates))
     with _locked(out):
         summarise(load_rows(out), out)
     return 0

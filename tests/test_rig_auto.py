@@ -140,3 +140,55 @@ def test_rig_cli_errors_before_solving(tmp_path, capsys, extra, message):
 def test_rig_cli_without_inputs_names_them(tmp_path, capsys):
     assert main(["rig", "--out", str(tmp_path / "o"), "--target", "t.obj"]) == 2
     assert "rig: expected --template, --examples, --weights (or --resume RUN_DIR), found none" in capsys.readouterr().err
+
+
+def test_final_schedule_follows_the_scored_candidate():
+    from facebasis.rigging.crossval import CrossValidation
+
+    opts = GenerationOptions(iterations=3, lam=(100.0, 10.0))
+    kw = dict(grid=(0.01, 0.1, 1.0, 10.0), errors=(0.3, 0.1, 0.2, 0.4), fold_errors=((0.3, 0.1, 0.2, 0.4),),
+              best_alpha=0.1, schedule=(0.5, 0.1), folds=(0, 0), chain_iterations=2, seconds=0.0, cpu_seconds=0.0)
+    path = CrossValidation(candidates="path", **kw).final_schedule(opts)
+    top = GenerationOptions(iterations=3, alpha=(50.0, 10.0)).schedule()
+    assert path == top + [(1.0, 10.0)] * 2 + [(0.1, 10.0)] * 2
+    cold = CrossValidation(candidates="cold", **kw).final_schedule(opts)
+    assert cold == GenerationOptions(iterations=3, alpha=(0.5, 0.1)).schedule()
+
+
+def test_auto_alpha_returns_the_rig_its_curve_scored():
+    """"path": the curve's error of the chosen alpha on a fold is that of the path on the other
+    folds, and the returned rig is the same path on all training expressions (not a fresh run)."""
+    pp = default_face_problem(seed=0, n_train=8)
+    grid = (0.01, 0.1, 10.0)
+    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never")
+    res = generate_blendshapes(pp.problem, opts)
+    cv = res.crossval
+    assert cv.candidates == "path" and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
+    sched = cv.final_schedule(opts)
+    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
+    fixed = dataclasses.replace(opts, alpha=(1.0, 1.0))
+    ref = BlendshapeGenerator(pp.problem, fixed).run(schedule=sched)
+    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
+    # fold 1's error of the chosen alpha: the path down to it on fold 0's expressions
+    gen = BlendshapeGenerator(pp.problem, fixed)
+    train, held = np.flatnonzero(np.array(cv.folds) != 1), np.flatnonzero(np.array(cv.folds) == 1)
+    rig = gen.subset(train).run(schedule=sched).rig
+    c = grid.index(cv.best_alpha)
+    assert heldout_error(rig, pp.problem.examples[held], pp.problem.pair_indices) == pytest.approx(
+        cv.fold_errors[1][c], rel=1e-9)
+
+
+def test_cold_candidates_do_not_depend_on_the_others():
+    """"cold": a candidate's fold errors are the same whatever else is on the grid (no warm start)."""
+    pp = default_face_problem(seed=1, n_train=8)
+    opts = GenerationOptions(iterations=2, cv_folds=2, cv_candidates="cold")
+    gen = BlendshapeGenerator(pp.problem, opts)
+    full = cross_validate_alpha(gen, grid=(0.01, 0.1, 10.0))
+    alone = cross_validate_alpha(gen, grid=(0.1,))
+    assert full.candidates == "cold"
+    assert np.allclose([f[1] for f in full.fold_errors], [f[0] for f in alone.fold_errors], rtol=1e-12, atol=0)
+    path = cross_validate_alpha(gen, grid=(0.01, 0.1, 10.0), candidates="path")
+    assert path.fold_errors[0][2] == pytest.approx(full.fold_errors[0][2], rel=1e-12)  # the top: the same run
+    assert path.fold_errors[0][1] != pytest.approx(full.fold_errors[0][1], rel=1e-9)   # below: warm-started
+    with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, found 'warm'"):
+        GenerationOptions(cv_candidates="warm")

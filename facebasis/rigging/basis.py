@@ -14,8 +14,9 @@ Array layouts (the four a newcomer meets here)::
 
     frames_cm          (q, 3, 3, t)   shape, coordinate x, frame column c, triangle (geometry)
     edge columns       (q, 3, 2, t)   its first two columns (v2 - v1, v3 - v1), as (q, 6, t)
-    triangle-major     (6, t, q)      row 2x + c, triangle, shape: :func:`to_triangle_major`,
+    triangle-first     (t, 6, q)      triangle, row 2x + c, shape: :func:`to_triangle_major`,
                                       :func:`training_rows`; the inputs RT, AT of :func:`basis_rows`
+                                      (a block of triangles is one contiguous (6c, q) matrix)
     reconstruction     (2, t, 3, k)   column c, triangle, coordinate x, shape: the output of
                                       :func:`basis_rows`, reshaped (2t, 3k) it is the right-hand side
                                       of ``EdgePoisson.solve_frame_rows`` (no transpose of the whole
@@ -63,10 +64,11 @@ def regularisation_weights(template_frame_deltas, template_frames, mu=0.1, sigma
 BASIS_BLOCK = 512
 
 #: the basis step uses the m x m Woodbury form while ``m < WOODBURY_RATIO * k``, else the direct
-#: k x k Cholesky per triangle. Measured on ICT (k = 53, 28,068 triangles, one core): Woodbury
-#: 0.95 s vs direct 1.14 s per step at m = 40, 1.73 s vs 1.14 s at m = 53 (forming the m x m
-#: systems costs 2 k m^2 per triangle against k^3 / 3 for the Cholesky factor).
-WOODBURY_RATIO = 0.8
+#: k x k Cholesky per triangle. Measured on ICT (k = 53, 28,068 triangles, one thread, CPU seconds
+#: per step): direct 0.48-0.55 vs Woodbury 0.30 at m = 20, 0.48-0.55 vs 0.45-0.50 at m = 30,
+#: 0.46 vs 0.64-0.73 at m = 40 (forming the m x m systems costs 2 k m^2 per triangle against
+#: k^3 / 3 for the Cholesky factor).
+WOODBURY_RATIO = 0.6
 
 
 def use_direct(k: int, m: int) -> bool:
@@ -80,66 +82,103 @@ def _lapack_posv():
     return lapack.dposv
 
 
+#: triangles whose k x k systems are formed at a time inside a block of the direct path (one
+#: cache-resident buffer of SUB_BLOCK k^2 doubles, reused, instead of a block-sized array)
+SUB_BLOCK = 32
+
+#: below this fraction of ``||R||^2`` the block's E_fit is recomputed from the residual itself
+#: (the short form of :func:`_block_energies` subtracts numbers of the size of ``||R||^2``)
+FIT_CANCELLATION = 1e-6
+
+
+def _block_energies(X, Rs, XR, Y, As, wt, alpha):
+    """(E_fit, E_reg) of eq. 2 and 3 on a block, from the solved system instead of the residual.
+
+    With ``(X X^T + D) Y = X R + D A~`` (``D = alpha diag(w)``, per triangle), ``Y X X^T Y`` equals
+    ``Y (XR + D A~ - D Y)``, so ``E_fit = ||R||^2 - 2 Y.XR + Y.X X^T Y = ||R||^2 - Y.XR + Y.D(A~ - Y)``:
+    inner products of (c, 6, k) arrays, no (6c, m) product with X. Where that difference is small
+    against ``||R||^2`` (below :data:`FIT_CANCELLATION`) it is recomputed as ``||Y X - R||^2``.
+
+    Rs (6c, m), XR = Rs X^T and Y, As (c, 6, k), wt (c, k).
+    """
+    diff = As - Y
+    wd = diff * wt[:, None, :]
+    e_reg = float(np.vdot(wd, diff))
+    r2 = float(np.vdot(Rs, Rs))
+    e_fit = r2 - float(np.vdot(Y, XR)) + alpha * float(np.vdot(Y, wd))
+    if e_fit < FIT_CANCELLATION * r2:
+        fit = Y.reshape(len(Rs), -1) @ X
+        fit -= Rs
+        e_fit = float(np.vdot(fit, fit))
+    return e_fit, e_reg
+
+
 def _basis_block(X, XX, RT, AT, w, alpha, out, s):
     """Eq. 4 on the triangles of slice ``s``; writes ``out[:, s]`` and returns (E_fit, E_reg) there.
 
-    Triangle-major layout, so that every product has the shapes (6c, .) x (., k) and the result
-    lands in the reconstruction's layout without a transpose of the whole array:
-    ``RT`` (6, m_tri, m) and ``AT`` (6, m_tri, k) hold ``R_j`` and ``A~_i`` with the 6 edge-column
-    entries (coordinate d, column e) first; ``out`` is (2, m_tri, 3, k) = [column e, triangle,
-    coordinate d, shape i]. ``XX`` is ``X X^T`` (k, k) when :func:`use_direct` (k x k Cholesky
-    solves, one LAPACK ``posv`` per triangle), else the (k, m*m) table of ``x_i x_i^T`` for the
-    Woodbury form.
+    Triangle-first layout: ``RT`` (m_tri, 6, m) and ``AT`` (m_tri, 6, k) hold ``R_j`` and ``A~_i``
+    with the 6 edge-column entries (coordinate d, column e) after the triangle, so a block's rows
+    are one contiguous (6c, m) matrix, its right-hand sides ``X R + D A~`` come out of one product
+    as (c, 6, k), which is per triangle the Fortran-ordered (k, 6) LAPACK solves in place;
+    ``out`` is (2, m_tri, 3, k) = [column e, triangle, coordinate d, shape i]. ``XX`` is ``X X^T``
+    (k, k) when :func:`use_direct` (k x k Cholesky solves, one LAPACK ``posv`` per triangle, the
+    matrices formed :data:`SUB_BLOCK` at a time in one reused buffer), else the (k, m*m) table of
+    ``x_i x_i^T`` for the Woodbury form.
     """
     k, m = X.shape
     wt = w[s]                                            # (c, k)
     c = wt.shape[0]
-    Rs = np.ascontiguousarray(RT[:, s, :]).reshape(6 * c, m)
-    As = AT[:, s, :]                                     # (6, c, k)
+    Rs = RT[s].reshape(6 * c, m)                         # contiguous view
+    As = AT[s]                                           # (c, 6, k)
+    XR = (Rs @ X.T).reshape(c, 6, k)                     # sum_j x_ij R_j
     if use_direct(k, m):  # (X X^T + D) Y = X R + D A~ directly, per triangle (Cholesky: D > 0)
         D = alpha * wt
-        A = np.broadcast_to(XX, (c, k, k)).copy()
-        A.reshape(c, -1)[:, :: k + 1] += D
-        rhs = (Rs @ X.T).reshape(6, c, k)
-        rhs += D[None] * As
-        Yt = np.ascontiguousarray(rhs.transpose(1, 0, 2))  # (c, 6, k): Yt[t].T is (k, 6) Fortran-ordered
+        Y = D[:, None, :] * As
+        Y += XR                                          # right-hand sides, solved in place: (c, 6, k)
         posv = _lapack_posv()
-        for t in range(c):  # one LAPACK call per triangle, in place, without the GIL
-            _, x, info = posv(A[t].T, Yt[t].T, overwrite_a=1, overwrite_b=1)
-            if info != 0:  # pragma: no cover - X X^T + D is positive definite for alpha, w > 0
-                raise SolverError(f"basis step: Cholesky failed on a triangle (LAPACK info {info})", str(info))
-        Y = np.ascontiguousarray(Yt.transpose(1, 0, 2))    # (6, c, k)
+        buf = np.empty((min(SUB_BLOCK, c), k, k))
+        for j0 in range(0, c, SUB_BLOCK):
+            n = min(SUB_BLOCK, c - j0)
+            A = buf[:n]
+            A[...] = XX
+            A.reshape(n, -1)[:, :: k + 1] += D[j0:j0 + n]
+            for t in range(n):  # one LAPACK call per triangle, in place, without the GIL
+                _, _, info = posv(A[t].T, Y[j0 + t].T, lower=1, overwrite_a=1, overwrite_b=1)
+                if info != 0:  # pragma: no cover - X X^T + D is positive definite for alpha, w > 0
+                    raise SolverError(f"basis step: Cholesky failed on a triangle (LAPACK info {info})", str(info))
     else:
         dinv = 1.0 / (alpha * wt)                        # D^-1, (c, k)
-        Gm = (Rs @ X.T).reshape(6, c, k)                 # sum_j x_ij R_j
-        Gm *= dinv[None]
+        Gm = XR * dinv[:, None, :]
         Gm += As                                         # D^-1 (X R + D A~)
-        XtG = (Gm.reshape(6 * c, k) @ X).reshape(6, c, m)
+        XtG = (Gm.reshape(6 * c, k) @ X).reshape(c, 6, m)
         # K_t = I + X^T D_t^-1 X for every triangle of the block: one (c, k) x (k, m*m) product
         K = (dinv @ XX).reshape(c, m, m)
         K.reshape(c, -1)[:, :: m + 1] += 1.0
-        Z = np.linalg.solve(K, XtG.transpose(1, 2, 0))   # (c, m, 6)
-        XZ = (np.ascontiguousarray(Z.transpose(2, 0, 1)).reshape(6 * c, m) @ X.T).reshape(6, c, k)
-        XZ *= dinv[None]
-        Y = np.subtract(Gm, XZ, out=Gm)                  # (6, c, k)
-    out[:, s] = Y.reshape(3, 2, c, k).transpose(1, 2, 0, 3)
-    # eq. 2 and eq. 3 on the block
-    fit = (Y.reshape(6 * c, k) @ X).reshape(6 * c, m)
-    fit -= Rs
-    diff = As - Y
-    diff *= diff
-    return float(np.vdot(fit, fit)), float(np.einsum("ck,dck->", wt, diff))
+        Z = np.linalg.solve(K, XtG.transpose(0, 2, 1))   # (c, m, 6)
+        XZ = (np.ascontiguousarray(Z.transpose(0, 2, 1)).reshape(6 * c, m) @ X.T).reshape(c, 6, k)
+        XZ *= dinv[:, None, :]
+        Y = np.subtract(Gm, XZ, out=Gm)                  # (c, 6, k)
+    out[:, s] = Y.reshape(c, 3, 2, k).transpose(2, 0, 1, 3)
+    return _block_energies(X, Rs, XR, Y, As, wt, alpha)
 
 
 def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
-    """Eq. 4 for every triangle in the triangle-major layout of :func:`_basis_block`.
+    """Eq. 4 for every triangle in the triangle-first layout of :func:`_basis_block`.
+
+    Parameters
+    ----------
+    X : (k, m) weights
+    RT : (m_tri, 6, m) training rows (:func:`training_rows`), C-contiguous
+    AT : (m_tri, 6, k) prior rows (:func:`to_triangle_major`)
+    w : (m_tri, k) regulariser weights; alpha : > 0
 
     Returns (out (2, m_tri, 3, k), E_fit, E_reg); ``out.reshape(2 m_tri, 3k)`` is what
     :meth:`facebasis.geometry.poisson.EdgePoisson.solve_frame_rows` takes.
     """
     k, m = X.shape
-    m_tri = RT.shape[1]
+    m_tri = RT.shape[0]
     X = np.ascontiguousarray(X, dtype=np.float64)
+    RT = np.ascontiguousarray(RT, dtype=np.float64)
     XX = X @ X.T if use_direct(k, m) else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
     out = np.empty((2, m_tri, 3, k))
     blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]
@@ -151,20 +190,20 @@ def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
 
 
 def training_rows(E, F) -> np.ndarray:
-    """Edge columns of the frames of deltas ``E`` (m, n, 3) in the triangle-major layout
-    (6, m_tri, m) of :func:`basis_rows`: row ``2 d + e`` is coordinate d of column e
+    """Edge columns of the frames of deltas ``E`` (m, n, 3) in the triangle-first layout
+    (m_tri, 6, m) of :func:`basis_rows`: row ``2 d + e`` is coordinate d of column e
     (e = 0: v2 - v1, e = 1: v3 - v1), as ``frames_cm(T)[:, :, :2] - frames_cm(B_0)[:, :2]``."""
     Et = np.ascontiguousarray(np.asarray(E, dtype=np.float64).transpose(1, 2, 0))  # (n, 3, m)
-    v1 = Et[F[:, 0]]
-    out = np.empty((3, 2, len(F), Et.shape[2]))
-    out[:, 0] = (Et[F[:, 1]] - v1).transpose(1, 0, 2)
-    out[:, 1] = (Et[F[:, 2]] - v1).transpose(1, 0, 2)
-    return out.reshape(6, len(F), -1)
+    v1 = Et[F[:, 0]]                                                                 # (m_tri, 3, m)
+    out = np.empty((len(F), 3, 2, Et.shape[2]))
+    np.subtract(Et[F[:, 1]], v1, out=out[:, :, 0])
+    np.subtract(Et[F[:, 2]], v1, out=out[:, :, 1])
+    return out.reshape(len(F), 6, -1)
 
 
 def to_triangle_major(A) -> np.ndarray:
-    """(q, 6, m_tri) -> (6, m_tri, q), the layout of :func:`basis_rows`."""
-    return np.ascontiguousarray(np.asarray(A, dtype=np.float64).transpose(1, 2, 0))
+    """(q, 6, m_tri) -> (m_tri, 6, q), the layout of :func:`basis_rows`."""
+    return np.ascontiguousarray(np.asarray(A, dtype=np.float64).transpose(2, 1, 0))
 
 
 def basis_step(X, R, A_tilde, w, alpha, *, executor=None, block: int = BASIS_BLOCK, energies: bool = False):

@@ -6,11 +6,22 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
 * the training expressions are split into ``cv_folds`` interleaved folds (example j in fold
   ``j mod K``);
 * for every fold, a rig is generated from the other folds for every candidate final alpha ``a``
-  of ``cv_grid`` (the schedule ``(5 a, a)``, the paper's ratio 0.5 -> 0.1): the candidates are
-  visited from the largest (close to plain deformation transfer) to the smallest, the first with
-  the full schedule, each next one warm-started from the previous one's weights with
-  ``cv_chain_iterations`` alternations at its own final alpha (a continuation, as the paper's
-  schedule itself is);
+  of ``cv_grid``, in one of two ways (``cv_candidates``), and the final run on all training
+  expressions is made *the same way* for the chosen alpha, so that the curve scores the
+  procedure whose result is returned:
+
+  - ``"path"`` (default): one warm-started regularisation path per fold, as the paper's own
+    schedule is a continuation: the largest candidate with the full schedule ``(5 a, a)`` (the
+    paper's ratio 0.5 -> 0.1), then each next smaller one with ``cv_chain_iterations``
+    alternations at its own final alpha from the previous one's weights. The final run follows
+    the path on all training expressions down to the chosen alpha (:meth:`CrossValidation.final_schedule`);
+  - ``"cold"``: every candidate from the rough weights with its own full schedule ``(5 a, a)``,
+    so no candidate depends on the others (about ``len(grid) * iterations / (iterations +
+    chain * (len(grid) - 1))`` times the cost of ``"path"``); the final run is that schedule;
+
+  (the earlier form scored the path but returned the fresh schedule of the chosen alpha: on ICT
+  person problems the path's small alphas had more alternations behind them than that final run,
+  and its choice was not the best for the rig it returned; ``reports/examples_study/cv_fix.md``);
 * each rig is scored on the held-out fold by refitting weights (bounds + complementarity, no
   prior; the certified optimum) and measuring ``||B_0 + B x - T|| / ||T - B_0||``;
 * the curve is the error pooled over the folds per candidate; the smallest wins.
@@ -43,6 +54,9 @@ DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
 #: ratio first/last alpha of a candidate schedule (the paper's 0.5 -> 0.1)
 SCHEDULE_RATIO = 5.0
 
+#: how the candidates of a fold are generated (module docstring)
+CANDIDATE_MODES = ("path", "cold")
+
 
 @dataclass(frozen=True)
 class CrossValidation:
@@ -50,8 +64,9 @@ class CrossValidation:
 
     grid : candidate final alphas (ascending); errors : pooled held-out relative error per
     candidate; fold_errors : (folds, candidates) per fold; best_alpha, schedule : the choice and
-    its schedule (first, last); folds : fold of every training expression; seconds : wall time;
-    rigs_generated : rigs built (folds x candidates).
+    its schedule (first, last); folds : fold of every training expression; candidates : ``"path"``
+    or ``"cold"`` (module docstring); seconds : wall time; rigs_generated : rigs built
+    (folds x candidates).
     """
 
     grid: tuple[float, ...]
@@ -63,10 +78,30 @@ class CrossValidation:
     chain_iterations: int
     seconds: float
     cpu_seconds: float
+    candidates: str = "path"
 
     @property
     def rigs_generated(self) -> int:
         return len(self.fold_errors) * len(self.grid)
+
+    def final_schedule(self, options) -> list[tuple[float, float]]:
+        """The (alpha, lambda) of every alternation of the final run on all training expressions:
+        what the curve scored for :attr:`best_alpha` (``options`` give ``iterations`` and lambda).
+
+        ``"cold"``: the schedule ``(5 a, a)``; ``"path"``: the schedule of the largest candidate,
+        then ``chain_iterations`` alternations at every next smaller candidate down to ``a``, at the
+        last lambda.
+        """
+        if self.candidates == "cold":
+            return dataclasses.replace(options, alpha=self.schedule).schedule()
+        top = self.grid[-1]
+        out = dataclasses.replace(options, alpha=(SCHEDULE_RATIO * top, top)).schedule()
+        lam_last = float(options.lam[1])
+        for a in self.grid[-2::-1]:
+            if a < self.best_alpha:
+                break
+            out += [(a, lam_last)] * self.chain_iterations
+        return out
 
     def to_json(self) -> dict:
         return {"method": "k-fold cross-validation of the final alpha (schedule 5a -> a), held-out error with "
@@ -74,7 +109,7 @@ class CrossValidation:
                 "grid": list(self.grid), "errors": list(self.errors),
                 "fold_errors": [list(r) for r in self.fold_errors], "best_alpha": self.best_alpha,
                 "schedule": list(self.schedule), "folds": list(self.folds),
-                "chain_iterations": self.chain_iterations, "seconds": self.seconds,
+                "candidates": self.candidates, "chain_iterations": self.chain_iterations, "seconds": self.seconds,
                 "cpu_seconds": self.cpu_seconds}
 
 
@@ -99,14 +134,14 @@ def fold_labels(m: int, folds: int) -> np.ndarray:
 
 
 def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_iterations: int | None = None,
-                         progress=None) -> CrossValidation:
+                         progress=None, candidates: str | None = None) -> CrossValidation:
     """Choose the final alpha by k-fold cross-validation (module docstring) on ``generator``'s problem.
 
     Parameters
     ----------
     generator : :class:`~facebasis.rigging.generation.BlendshapeGenerator` of all training expressions
-    grid, folds, chain_iterations : default to the generator's options (``cv_grid`` or
-        :data:`DEFAULT_GRID`, ``cv_folds``, ``cv_chain_iterations``)
+    grid, folds, chain_iterations, candidates : default to the generator's options (``cv_grid`` or
+        :data:`DEFAULT_GRID`, ``cv_folds``, ``cv_chain_iterations``, ``cv_candidates``)
     progress : optional callable(fold, alpha, error) after every rig
 
     Raises
@@ -119,6 +154,9 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
     grid = tuple(sorted(float(a) for a in (grid or opts.cv_grid or DEFAULT_GRID)))
     folds = int(folds or opts.cv_folds)
     chain = int(chain_iterations or opts.cv_chain_iterations)
+    candidates = candidates or opts.cv_candidates
+    if candidates not in CANDIDATE_MODES:
+        raise InputError(f"cv_candidates: expected one of {', '.join(CANDIDATE_MODES)}, found {candidates!r}")
     m = len(generator.problem.examples)
     if m < folds:
         raise InputError(f"--alpha auto: expected at least {folds} training expressions for {folds}-fold "
@@ -137,9 +175,9 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
         sub = generator.subset(train).with_options(base)
         T_held = generator.problem.examples[held]
         X = None
-        for c in range(len(grid) - 1, -1, -1):  # largest alpha first, then continue downwards
+        for c in range(len(grid) - 1, -1, -1):  # largest alpha first, then (path) continue downwards
             a = grid[c]
-            if X is None:
+            if X is None or candidates == "cold":
                 res = sub.with_options(dataclasses.replace(base, alpha=(SCHEDULE_RATIO * a, a))).run()
             else:
                 res = sub.run(X0=X, schedule=[(a, lam_last)] * chain)
@@ -154,8 +192,8 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
                            fold_errors=tuple(tuple(map(float, np.sqrt(num[f] / den[f]))) for f in range(folds)),
                            best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
                            chain_iterations=chain, seconds=time.perf_counter() - t0,
-                           cpu_seconds=time.process_time() - c0)
+                           cpu_seconds=time.process_time() - c0, candidates=candidates)
 
 
 __all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",
-           "DEFAULT_GRID", "SCHEDULE_RATIO"]
+           "DEFAULT_GRID", "SCHEDULE_RATIO", "CANDIDATE_MODES"]

@@ -76,6 +76,12 @@ class BlendshapeGenerator:
         opts = self.options
         tpl = problem.template
         F = tpl.faces
+        B0 = problem.target_neutral
+        # the training expressions' part of the precompute runs on a second thread while this one
+        # sets up the transfer (both are numpy work that releases the GIL)
+        side = ThreadPoolExecutor(1)
+        examples_part = side.submit(self._example_rows, problem.examples - B0, F)
+        side.shutdown(wait=False)
         self.dt = DeformationTransfer(tpl, problem.target_neutral, virtual_edges=problem.virtual_edges,
                                       virtual_weight=opts.virtual_weight, virtual_mode=opts.virtual_mode)
         m_tri = len(F)
@@ -84,7 +90,7 @@ class BlendshapeGenerator:
         dA -= self.dt.template_frames
         # eq. 3 prior: A~_i = Q_i A_0^B - A_0^B = (A_i^S - A_0^S) (A_0^S)^-1 A_0^B
         self.A_tilde = to_triangle_major(self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6,
-                                                                                                  m_tri))  # (6, m_tri, k)
+                                                                                                  m_tri))  # (m_tri, 6, k)
         self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
                                                              opts.sigma, opts.weight_measure))  # (m_tri, k)
         # virtual-edge targets (Li et al. 2023) of every shape, from the template as in deformation transfer:
@@ -93,15 +99,7 @@ class BlendshapeGenerator:
         self.extra_targets = None if vc is None else np.ascontiguousarray(
             vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         del dA
-        B0 = problem.target_neutral
-        # training frame deltas A_j^T - A_0^B: only the two edge columns enter, and edges are linear
-        # in the vertices, so they are the edges of T_j - B_0; built in the triangle-major layout
-        E = problem.examples - B0
-        self.R = training_rows(E, F)  # (6, m_tri, m)
-        # t_j per coordinate, (n, m) each: the reconstruction's output is (n, 3k) with columns
-        # (coordinate, shape), so the weight step's Gram matrices are three products of its slices
-        self.targets = [np.ascontiguousarray(E[:, :, d].T) for d in range(3)]
-        self.target_sq = (E ** 2).sum(axis=(1, 2))
+        self.R, self.targets, self.target_sq = examples_part.result()
         self.pairs = problem.pair_indices
         self._weight_solver = None  # the CasADi model, built when first needed (ipopt option)
         # anchors keep the template's delta (zero at still vertices), as deformation transfer does;
@@ -111,6 +109,18 @@ class BlendshapeGenerator:
         self._transfer_rows = None
         self.free = self._free_shapes()
         self.precompute_seconds = time.perf_counter() - t0
+
+    @staticmethod
+    def _example_rows(E, F):
+        """The training expressions' precompute from their deltas ``E = T - B_0`` (m, n, 3): the
+        frame deltas ``A_j^T - A_0^B`` (only the two edge columns enter, and edges are linear in the
+        vertices, so they are the edges of ``T_j - B_0``) in the triangle-first layout (m_tri, 6, m);
+        ``t_j`` per coordinate, three (n, m) (the reconstruction's output is (n, 3k) with columns
+        (coordinate, shape), so the weight step's Gram matrices are three products of its slices);
+        ``||t_j||^2`` (m,)."""
+        with threadpool_limits(1):
+            return (training_rows(E, F), [np.ascontiguousarray(E[:, :, d].T) for d in range(3)],
+                    (E ** 2).sum(axis=(1, 2)))
 
     def reconstruct(self, rows) -> np.ndarray:
         """Vertex deltas from the basis step's frame rows (2, m_tri, 3, k): returns (n, 3k) with
@@ -146,7 +156,7 @@ class BlendshapeGenerator:
         A~ reconstructed; computed once and shared with :meth:`subset` copies)."""
         if getattr(self, "_transfer_rows", None) is None:
             k = self.problem.template.n_shapes
-            rows = np.ascontiguousarray(self.A_tilde.reshape(3, 2, -1, k).transpose(1, 2, 0, 3))
+            rows = np.ascontiguousarray(self.A_tilde.reshape(-1, 3, 2, k).transpose(2, 0, 1, 3))
             self._transfer_rows = self.reconstruct(rows)
         return self._transfer_rows
 
@@ -225,7 +235,8 @@ class BlendshapeGenerator:
     def run(self, progress=None, *, X0=None, schedule=None, cv_progress=None) -> GenerationResult:
         """Alternate the basis and weight steps over the schedule (default: the options').
 
-        ``alpha="auto"`` first chooses the schedule by cross-validation (:mod:`.crossval`);
+        ``alpha="auto"`` first chooses the schedule by cross-validation (:mod:`.crossval`; the
+        alternations are then those of :meth:`~.crossval.CrossValidation.final_schedule`);
         ``X0`` (m, k) starts from other weights than the rough ones (a warm start);
         ``schedule`` is a list of (alpha, lambda), one per alternation.
         """
@@ -235,6 +246,8 @@ class BlendshapeGenerator:
             from .crossval import cross_validate_alpha
 
             crossval = cross_validate_alpha(self, progress=cv_progress)
+            # the final run is made the way the curve scored the chosen alpha (crossval.final_schedule)
+            schedule = crossval.final_schedule(self.options)
             self.options = dataclasses.replace(self.options, alpha=crossval.schedule)
         p, opts = self.problem, self.options
         X = p.initial_weights.copy() if X0 is None else np.array(X0, dtype=np.float64)  # (m, k)

@@ -9,7 +9,8 @@ Runs, from scratch, into ``reports/<data>/``:
   shapes from three views (``error_maps_*``);
 * the weight-step formulation comparison on the suite of :mod:`problems.weights_suite`
   -> ``formulations.*``;
-* the penetration close-ups (plain transfer vs virtual edges) and their counts -> ``penetration.*``.
+* the penetration close-ups (plain transfer / virtual edges / exact contact, remaining pairs in red)
+  and their counts -> ``penetration.*`` (``--only penetration``: this part alone).
 
 ``default`` needs nothing; ``ict`` reads ``../shared/data/ict/ict_face.npz``.
 """
@@ -82,10 +83,12 @@ def _vertex_mask(zone, n: int) -> np.ndarray:
 
 
 def _penetration(data: str, out: Path) -> list[Path]:
-    """Plain transfer vs virtual edges on a target with thinner / reshaped layers; counts per
-    expression (table) and close-ups (figure)."""
+    """Plain transfer, virtual edges and exact contact (``transfer --contact``) on a target with thinner
+    / reshaped layers; counts per expression (table) and close-ups (figure)."""
+    from facebasis.contact.exact import contact_transfer
     from facebasis.contact.penetration import LOCAL_FOLD_EDGES, pair_set, penetration_report
-    from facebasis.report.run_report import penetration_figure, write_table
+    from facebasis.report.penetration import penetration_figure
+    from facebasis.report.tables import write_table
     from facebasis.geometry.transfer import DeformationTransfer
     from facebasis.contact.virtual_edges import detect_virtual_edges
     from facebasis.geometry.mesh import median_edge_length
@@ -99,6 +102,7 @@ def _penetration(data: str, out: Path) -> list[Path]:
         zones = ict_zones()
         show = ("mouthClose", "jawForward", "mouthShrugLower", "eyeBlink_L")
         label = "ICT onto identity seed 0 scaled 3x"
+        exclude = ("mouthClose",)  # ICT's corrective pressing the lips together on top of jawOpen
     else:
         from facebasis.defaults.face import default_person, default_template, region_masks
 
@@ -108,17 +112,22 @@ def _penetration(data: str, out: Path) -> list[Path]:
         zones = {"lips": masks["lips"] | masks["mouth_socket"], "lids": masks["eyelids"]}
         show = ("mouthPucker", "jawOpen", "eyeBlink_L")
         label = "built-in template onto the built-in person"
+        exclude = ()
     F = template.faces
     ve = detect_virtual_edges(template.neutral, F)
     plain = DeformationTransfer(template, target).transfer()
     guarded = DeformationTransfer(template, target, virtual_edges=ve).transfer()
+    t = time.perf_counter()
+    contact = contact_transfer(template, target, exclude=exclude, allow_target_pairs=True)
+    contact_s = time.perf_counter() - t
+    excluded = {s.name for s in contact.shapes if s.excluded}
     neutral_pairs = pair_set(target, F)
     local_within = LOCAL_FOLD_EDGES * median_edge_length(target, F)  # closer along the target neutral: a local fold
     rows, arrays = [], {"faces": F}
     for i, name in enumerate(template.names):
         refs = (neutral_pairs, pair_set(template.neutral + template.deltas[i], F))
         counts = []
-        for kind, rig in (("plain", plain), ("ve", guarded)):
+        for kind, rig in (("plain", plain), ("ve", guarded), ("contact", contact.rig)):
             X = target + rig.deltas[i]
             rep = penetration_report(X, F, reference_pairs=refs, rest=target, local_within=local_within)
             new = rep.new
@@ -127,21 +136,30 @@ def _penetration(data: str, out: Path) -> list[Path]:
                 arrays[f"{name}/{kind}"] = X
                 arrays[f"{name}/{kind}_hits"] = np.unique(new[~rep.local].ravel())
                 arrays[f"{name}/{kind}_local_hits"] = np.unique(new[rep.local].ravel())
-        rows.append((name, counts[0][0], counts[1][0], counts[0][1], counts[1][1]))
-    total = tuple(sum(r[j] for r in rows) for j in range(1, 5))
-    rows.append(("total",) + total)
+                if kind == "contact" and name in excluded:
+                    arrays[f"{name}/contact_note"] = "excluded"
+        shape = contact.shapes[i]
+        rows.append((name + (" (excluded from contact)" if name in excluded else ""), counts[0][0], counts[1][0],
+                     counts[2][0], counts[0][1], counts[1][1], counts[2][1], shape.iterations,
+                     shape.solver_iterations, "" if np.isnan(shape.min_distance) else f"{shape.min_distance:.5f}"))
+    total = tuple(sum(r[j] for r in rows) for j in range(1, 7))
+    rows.append(("total",) + total + ("", "", ""))
     paths = write_table(out, "penetration", ("expression", "new pairs, plain transfer", "new pairs, virtual edges",
-                                             "layer crossings, plain", "layer crossings, virtual edges"), rows)
+                                             "new pairs, contact", "layer crossings, plain",
+                                             "layer crossings, virtual edges", "layer crossings, contact",
+                                             "contact rounds", "contact QP iterations", "contact min distance"), rows)
+    arrays["kinds"] = ("plain", "ve", "contact")
     arrays["names"] = [n for n in show if f"{n}/plain" in arrays]
-    shown = [template.neutral] + [arrays[f"{n}/{k}"] for n in arrays["names"] for k in ("plain", "ve")]
+    shown = [template.neutral] + [arrays[f"{n}/{k}"] for n in arrays["names"] for k in arrays["kinds"]]
     arrays["crops"] = {z: _crop(shown, zones[z]) for z in ("lips", "lids")}
     # the triangles of each zone (a corner in it): each close-up counts its own zone's triangles
     arrays["zone_faces"] = {z: np.flatnonzero(np.asarray(_vertex_mask(zones[z], len(target)))[F].any(1))
                             for z in ("lips", "lids")}
     paths += penetration_figure(arrays, out)
     print(f"  penetration ({label}): {total[0]} new intersecting pairs with plain transfer, {total[1]} with "
-          f"virtual edges ({len(ve)} edges); layer crossings (triangles >= {LOCAL_FOLD_EDGES:g} median edges apart along the target "
-          f"neutral) {total[2]} and {total[3]}")
+          f"virtual edges ({len(ve)} edges), {total[2]} with exact contact ({contact_s:.1f} s; excluded: "
+          f"{', '.join(sorted(excluded)) or 'none'}); layer crossings (triangles >= {LOCAL_FOLD_EDGES:g} median edges "
+          f"apart along the target neutral) {total[3]}, {total[4]} and {total[5]}")
     return paths
 
 
@@ -160,6 +178,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0", help="problem seeds of the studies (default 0)")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--scheduler", default=None)
+    parser.add_argument("--only", choices=("penetration",), default=None,
+                        help="regenerate only this part (penetration: the counts and close-ups, no studies)")
     args = parser.parse_args(argv)
     if args.data == "ict":
         from problems.ict import ict_available, ict_path
@@ -170,6 +190,10 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else REPO / "reports" / args.data
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    if args.only == "penetration":
+        _penetration(args.data, out)
+        print(f"{_shown(out)}: penetration regenerated ({args.data} data) in {time.perf_counter() - t0:.0f} s")
+        return 0
     from facebasis.report.run_report import formulation_report, report_run, sweep_report
     from facebasis.report.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
 

@@ -179,3 +179,30 @@ def test_reports_script_names_the_folder_it_wrote(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert _shown(tmp_path / "x") == "x"
     assert _shown(Path("/elsewhere/out")) == "/elsewhere/out"
+
+
+def test_penetration_closeups_gain_a_contact_column(tmp_path, linted):
+    """Three columns per zone (plain / virtual edges / exact contact); the contact panels count their
+    remaining pairs (here none) and show a note for an excluded shape."""
+    from facebasis.report.penetration import penetration_figure
+
+    from conftest import grid_sheet
+
+    problems, titles = linted
+    V, F = grid_sheet(8, 6)
+    V = np.asarray(V, float)
+    c = np.asarray(V)[np.asarray(F)].mean(1)
+    left, right = np.flatnonzero(c[:, 0] < 0.5), np.flatnonzero(c[:, 0] >= 0.5)
+    data = {"faces": np.asarray(F), "names": ["e", "x"], "kinds": ("plain", "ve", "contact"),
+            "crops": {"a": ("front", ((-0.1, 0.5), (-0.1, 1.1))), "b": ("front", ((0.5, 1.1), (0.2, 0.5)))},
+            "zone_faces": {"a": left, "b": right}}
+    for name, contact_hits in (("e", left[:0]), ("x", right[:2])):
+        for kind, hits in (("plain", np.r_[left[:3], right[:2]]), ("ve", left[:1]), ("contact", contact_hits)):
+            data[f"{name}/{kind}"] = V
+            data[f"{name}/{kind}_hits"] = hits
+    data["x/contact_note"] = "excluded"
+    penetration_figure(data, tmp_path)
+    assert titles["penetration_closeups"] == ["3 crossing", "1 crossing", "0 crossing", "2 crossing", "0 crossing",
+                                              "0 crossing", "3 crossing", "1 crossing", "0 crossing\n(excluded)",
+                                              "2 crossing", "0 crossing", "2 crossing\n(excluded)"]
+    assert problems["penetration_closeups"] == []

@@ -2,8 +2,11 @@
 
 Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else a search over
 candidate orientations plus trimmed ICP with scale), then non-rigid ICP with a stiffness schedule
-(:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term). The
-work happens in the template's frame and units; the result is mapped back onto the scan.
+(:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term: local
+similarities from the template, since two faces differ in local size; local rotations from a
+person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
+person, same scanner). The work happens in the start mesh's frame and units; the result is mapped
+back onto the scan.
 
 :class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
 landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
@@ -242,7 +245,8 @@ class Registration:
         surface = ScanSurface(V, F)
         rng = np.random.default_rng(rigid.seed)
         sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
-        sim, score = refine_point_to_plane(sub, surface.closest, sim, keep=rigid.keep_template, scale=rigid.scale)
+        sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations, rigid.keep_template,
+                                           scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
         inv = sim.inverse()
         surface_t = surface.moved(inv.apply(V))

@@ -75,6 +75,9 @@ class RigidOptions:
     keep_scan : fraction of scan-to-template pairs kept (noise, stray parts of the scan)
     seed : seed of the point sampling
     scale : estimate the scale (else a rigid motion: e.g. the same person's scans from one scanner)
+    plane_iterations : at most this many steps of the final point-to-plane refinement
+        (:func:`refine_point_to_plane`; it stops when a step is negligible: from a pose 2-3 cm off,
+        as the point-to-point stage can leave it, it needs about 40)
     """
 
     samples: int = 1500
@@ -85,6 +88,7 @@ class RigidOptions:
     keep_scan: float = 0.9
     seed: int = 0
     scale: bool = True
+    plane_iterations: int = 50
 
 
 def umeyama(A: np.ndarray, B: np.ndarray, scale: bool = True) -> Similarity:

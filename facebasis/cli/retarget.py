@@ -34,8 +34,14 @@ def cmd_retarget(args) -> int:
     if args.smooth is not None and not (math.isfinite(args.smooth) and args.smooth >= 0):
         raise InputError(f"--smooth: expected a finite number >= 0, found {args.smooth}")
 
+    if args.first_frame_neutral:
+        if args.identity not in (None, "first-frame"):
+            raise InputError(f"--first-frame-neutral: expected no other --identity, found --identity {args.identity} "
+                             f"(--first-frame-neutral is the older spelling of --identity first-frame)")
+        print("note: --first-frame-neutral is the older spelling of --identity first-frame (it still works)")
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
-                     ridge=args.ridge, neutral=args.neutral, first_frame_neutral=args.first_frame_neutral, log=print)
+                     ridge=args.ridge, neutral=args.neutral,
+                     identity="first-frame" if args.first_frame_neutral else args.identity, log=print)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -98,12 +104,16 @@ def register(subparsers) -> None:
                         "0.001 on noise-free data, about 0.2 on a webcam clip with --first-frame-neutral, so "
                         "shapes stop saturating on noise and face-shape differences (see reports/reproduction). "
                         "A number fixes it")
+    p.add_argument("--identity", default=None, metavar="auto|first-frame|rig",
+                   help="how the filmed person's neutral face is obtained, so that the difference between their "
+                        "face and the rig's is not read as expression. 'auto' (default): estimated from the capture, "
+                        "no neutral frame needed: shapes that stay on through nearly all of it (the lowest 10%% of "
+                        "their weights on 40 pilot frames) become part of the neutral, plus the median landmark "
+                        "residual that no shape can produce; kept only if it lowers the pilot residual by 10%% or "
+                        "more. 'first-frame': frame 0 shows the neutral face (wrong if the capture starts on an "
+                        "expression). 'rig': the rig's own neutral")
     p.add_argument("--first-frame-neutral", action="store_true",
-                   help="the first frame shows the neutral face: adapt the rig's landmark positions to it, so "
-                        "differences between the tracked face's shape and the rig's are not read as expression. "
-                        "Off by default (wrong when the capture starts on an expression); recommended on real video "
-                        "that starts on a calm face: the log prints a hint when the rig's neutral fits the "
-                        "landmarks poorly")
+                   help="older spelling of --identity first-frame (still accepted)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_retarget)
 

@@ -18,6 +18,7 @@ drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
 observe    which shapes the landmarks can tell apart (:func:`identifiability`)
+calibrate  the person's neutral landmarks estimated from the capture (identity "auto")
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
 

@@ -236,36 +236,53 @@ def _parse_ridge(ridge):
 
 
 #: relative landmark noise (rms residual over the rms landmark radius of the rig) above which the
-#: retarget log suggests --first-frame-neutral: ~1% for 1 px noise on a synthetic 20 px/cm face,
-#: 7% on a real webcam clip fitted with ICT's own neutral (the face shape is not ICT's)
+#: retarget log suggests calibrating the identity (--identity auto, or first-frame): ~1% for 1 px noise
+#: on a synthetic 20 px/cm face, 7% on a real webcam clip fitted with ICT's own neutral
 FIRST_FRAME_HINT = 0.03
 
 
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
-                 neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool = False,
-                 log=None) -> dict:
+                 neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
+                 identity: str | None = None, log=None) -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
-    (:func:`.rigdrive.auto_ridge`); a number fixes it.
+    (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
+    or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
     """
     from ..rigging.examples import parse_pairs
-    from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_pairs
+    from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
     ridge = _parse_ridge(ridge)
+    if identity is not None and not isinstance(identity, str):
+        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
+    if isinstance(identity, str) and identity not in ("auto", "first-frame", "rig"):
+        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
+    try:
+        identity = resolve_identity(identity, first_frame_neutral)
+    except InputError as exc:
+        raise InputError(f"--identity and --first-frame-neutral: {str(exc).split(': ', 1)[1]}") from None
     cap = read_capture(capture_dir)
     r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
-    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, first_frame_neutral=first_frame_neutral)
+    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity)
     ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
-         + f"; smooth {smooth:g}, ridge {ridge_text}")
+         + f"; smooth {smooth:g}, ridge {ridge_text}; identity {identity}")
     result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
     extra = {"smooth": smooth, "ridge": result.ridge, "ridge_rule": "auto" if ridge == "auto" else "given",
-             "solver": solver, "first_frame_neutral": first_frame_neutral}
+             "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame"}
+    cal = result.calibration
+    if cal is not None:
+        moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))
+        extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
+                      "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
+        _log(log, f"identity: static landmark offset estimated on {len(cal.frames)} pilot frames "
+                  f"({moved:.3g} rig units rms); pilot residual {cal.rms_before:.2f} px with the rig's neutral, "
+                  f"{cal.rms_after:.2f} px calibrated")
     if ridge == "auto":
         v0 = r.neutral[idx]
         radius = float(np.sqrt(np.mean(np.sum((v0 - v0.mean(0)) ** 2, axis=1))))
@@ -274,10 +291,10 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         extra.update({"noise_rig_units": result.noise, "noise_px": noise_px, "noise_relative": relative})
         _log(log, f"landmark noise {noise_px:.2f} px ({result.noise:.3g} rig units, {100 * relative:.1f}% of the "
                   f"face's landmark radius): ridge {result.ridge:.3g}")
-        if not first_frame_neutral and relative > FIRST_FRAME_HINT:
+        if identity == "rig" and relative > FIRST_FRAME_HINT:
             _log(log, "hint: the rig's neutral reproduces these landmarks poorly (the face's shape is not the "
-                      "rig's, or its landmarks are defined differently); if the capture starts on a neutral face, "
-                      "--first-frame-neutral takes it as the neutral and the weights stop absorbing the difference")
+                      "rig's, or its landmarks are defined differently); --identity auto (the default) estimates "
+                      "the person's neutral from the capture, --identity first-frame takes frame 0 as it")
     with atomic_directory(out_dir) as stage:
         summary = write_retarget_outputs(stage, r, result, named, extra)
     return summary

@@ -40,8 +40,12 @@ noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 p
 20 px/cm gives rho ~0.004 / 0.015 and a lower weight error than 1e-3; a 400-frame dlib webcam capture
 (6.7 px/cm) gives rho 0.49 with ICT's own neutral and 0.20 with ``first_frame_neutral``, and no
 weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
-``first_frame_neutral`` stays off by default (it is wrong when the capture starts on an expression);
-the ``retarget`` command prints a hint when the neutral fits the landmarks poorly.
+
+Identity (``identity``): the rig's neutral landmarks are not the filmed person's. ``"auto"`` (the
+default) estimates a static landmark offset from the capture (:mod:`.calibrate`): the baseline of
+shapes that stay on through nearly all of it plus the median in-plane residual; ``"first-frame"``
+takes frame 0 as the neutral (wrong when the capture starts on an expression; the former
+``first_frame_neutral=True``); ``"rig"`` uses the rig's neutral as it is.
 """
 
 from __future__ import annotations
@@ -53,9 +57,17 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.rig import Rig
+from .calibrate import IdentityCalibration, calibrate_identity
 from .observe import Identifiability, identifiability, landmark_jacobian
-from .pose import (PI, fit_pose_affine, fit_pose_gn, pose_jacobian, project_landmarks, rotation_from_vector,
-                   rotation_to_vector)
+from .pose import (
+    PI,
+    fit_pose_affine,
+    fit_pose_gn,
+    pose_jacobian,
+    project_landmarks,
+    rotation_from_vector,
+    rotation_to_vector,
+)
 
 #: default temporal smoothness mu (rig units^2 per unit weight^2)
 DEFAULT_SMOOTH = 0.05
@@ -67,6 +79,24 @@ RIDGE_FLOOR = 1e-3
 PRIOR_STD = 0.5
 #: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
 PILOT_FRAMES = 40
+#: how the person's neutral landmarks are obtained (see the module docstring and :mod:`.calibrate`)
+IDENTITY_MODES = ("auto", "first-frame", "rig")
+#: default identity mode (measured in reports/reproduction/real_clips_notes.md and reports/retarget)
+DEFAULT_IDENTITY = "auto"
+
+
+def resolve_identity(identity=None, first_frame_neutral=None) -> str:
+    """The identity mode from ``identity`` and the older boolean ``first_frame_neutral`` (True is
+    ``"first-frame"``, False is ``"rig"``); both given and disagreeing: :class:`InputError`."""
+    if identity is not None and identity not in IDENTITY_MODES:
+        raise InputError(f"identity: expected one of {', '.join(IDENTITY_MODES)}, found {identity!r}")
+    if first_frame_neutral is None:
+        return DEFAULT_IDENTITY if identity is None else identity
+    old = "first-frame" if first_frame_neutral else "rig"
+    if identity is not None and identity != old:
+        raise InputError(f"identity: expected one setting, found identity={identity!r} and "
+                         f"first_frame_neutral={bool(first_frame_neutral)} (which means {old!r})")
+    return old
 
 
 def auto_ridge(noise_rig: float, prior_std: float = PRIOR_STD, floor: float = RIDGE_FLOOR) -> float:
@@ -101,6 +131,8 @@ class RetargetResult:
     ridge : the ridge rho the frames were solved with (the "auto" rule's value when it was used)
     noise : landmark noise estimate of the "auto" rule, rig units (rms residual px / s of the pilot
         fit; nan when the ridge was given)
+    identity : how the neutral landmarks were obtained ("auto", "first-frame" or "rig")
+    calibration : the :class:`.calibrate.IdentityCalibration` of ``identity="auto"`` (else None)
     """
 
     names: tuple[str, ...]
@@ -114,6 +146,8 @@ class RetargetResult:
     seconds: float
     ridge: float = float("nan")
     noise: float = float("nan")
+    identity: str = "rig"
+    calibration: IdentityCalibration | None = None
 
     @property
     def n_frames(self) -> int:
@@ -172,15 +206,19 @@ class RigRetargeter:
     alternations : most pose/weight rounds per frame (the first frame, which starts from the neutral,
         gets at least 6); a frame stops once a round changes no weight by more than ``tol``
     tol : weight change that ends the rounds of a frame (warm-started frames usually need 2)
-    first_frame_neutral : treat the capture's first frame as the neutral expression: the rig's
-        landmarks are shifted (in the first frame's image plane) to match it exactly, so a face whose
-        shape differs from the rig's does not show up as expression (see :meth:`run`)
+    identity : "auto" (default, :data:`DEFAULT_IDENTITY`): the person's neutral landmarks estimated
+        from the capture (:func:`.calibrate.calibrate_identity`); "first-frame": frame 0 is the neutral
+        expression, the rig's landmarks are shifted (in frame 0's image plane) to match it exactly;
+        "rig": the rig's own neutral. The first two keep a face whose shape differs from the rig's
+        from showing up as expression (see :meth:`run`)
+    first_frame_neutral : older spelling: True is ``identity="first-frame"``, False ``"rig"``
     solver : "certified" (branch and bound, default) or "ipopt" (CasADi/IPOPT polished by it)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
-                 first_frame_neutral: bool = False):
+                 first_frame_neutral: bool | None = None, identity: str | None = None):
+        self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
             if ridge != "auto":
@@ -202,8 +240,9 @@ class RigRetargeter:
         self.smooth, self.ridge, self.alternations, self.solver = float(smooth), float(ridge), int(alternations), solver
         self.tol = float(tol)
         self.noise = float("nan")                                 # set by run() when the ridge is "auto"
-        self.first_frame_neutral = bool(first_frame_neutral)
-        self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() if first_frame_neutral
+        self.first_frame_neutral = self.identity == "first-frame"
+        self.calibration: IdentityCalibration | None = None      # set by run() with identity "auto"
+        self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() unless identity "rig"
         self.D = np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0))   # (L, 3, k)
         self._ipopt = None
         if solver == "ipopt":
@@ -327,10 +366,16 @@ class RigRetargeter:
         state = None
         t0 = time.perf_counter()
         self.v0 = self.rig.neutral[self.indices].copy()
-        if self.first_frame_neutral:
+        self.calibration = None
+        if self.identity == "first-frame":
             self._adopt_first_frame(np.nan_to_num(P[0]), vis[0])
+        elif self.identity == "auto":
+            self.calibration = calibrate_identity(self, np.nan_to_num(P), vis)
         if self.auto:
-            self.noise = self.estimate_noise(np.nan_to_num(P), vis)
+            if self.calibration is not None and np.isfinite(self.calibration.noise):
+                self.noise = self.calibration.noise          # its last pass is the same pilot fit
+            else:
+                self.noise = self.estimate_noise(np.nan_to_num(P), vis)
             self.ridge = auto_ridge(self.noise)
         for f in range(T):               # frames in order, each warm-started from the previous one
             x, s, R, t, r, n = self.solve_frame(np.nan_to_num(P[f]), vis[f], state)
@@ -339,7 +384,7 @@ class RigRetargeter:
             if progress is not None:
                 progress(f, T)
         return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0,
-                              self.ridge, self.noise if self.auto else float("nan"))
+                              self.ridge, self.noise if self.auto else float("nan"), self.identity, self.calibration)
 
 
 def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth: float = DEFAULT_SMOOTH,
@@ -355,4 +400,4 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
 __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
            "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
            "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
-           "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]
+           "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES", "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]

@@ -190,5 +190,11 @@ def test_cold_candidates_do_not_depend_on_the_others():
     path = cross_validate_alpha(gen, grid=(0.01, 0.1, 10.0), candidates="path")
     assert path.fold_errors[0][2] == pytest.approx(full.fold_errors[0][2], rel=1e-12)  # the top: the same run
     assert path.fold_errors[0][1] != pytest.approx(full.fold_errors[0][1], rel=1e-9)   # below: warm-started
-    with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, found 'warm'"):
+    both = cross_validate_alpha(gen, grid=(0.01, 0.1, 10.0), candidates="both")
+    assert np.allclose(both.curves["cold"], full.errors, rtol=1e-12, atol=0)
+    assert np.allclose(both.curves["path"], path.errors, rtol=1e-12, atol=0)
+    chosen = min(("path", "cold"), key=lambda mo: min(both.curves[mo]))
+    assert both.candidates == chosen and both.errors == pytest.approx(both.curves[chosen], rel=1e-15)
+    assert both.best_alpha == (0.01, 0.1, 10.0)[int(np.argmin(both.curves[chosen]))]
+    with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, both, found 'warm'"):
         GenerationOptions(cv_candidates="warm")

@@ -18,6 +18,8 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
   - ``"cold"``: every candidate from the rough weights with its own full schedule ``(5 a, a)``,
     so no candidate depends on the others (about ``len(grid) * iterations / (iterations +
     chain * (len(grid) - 1))`` times the cost of ``"path"``); the final run is that schedule;
+  - ``"both"``: the two curves (the largest candidate's rig is shared); the procedure whose curve
+    has the lower minimum is chosen with its alpha (the procedure is a hyperparameter too);
 
   (the earlier form scored the path but returned the fresh schedule of the chosen alpha: on ICT
   person problems the path's small alphas had more alternations behind them than that final run,
@@ -55,7 +57,7 @@ DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
 SCHEDULE_RATIO = 5.0
 
 #: how the candidates of a fold are generated (module docstring)
-CANDIDATE_MODES = ("path", "cold")
+CANDIDATE_MODES = ("path", "cold", "both")
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,8 @@ class CrossValidation:
     grid : candidate final alphas (ascending); errors : pooled held-out relative error per
     candidate; fold_errors : (folds, candidates) per fold; best_alpha, schedule : the choice and
     its schedule (first, last); folds : fold of every training expression; candidates : ``"path"``
-    or ``"cold"`` (module docstring); seconds : wall time; rigs_generated : rigs built
+    or ``"cold"`` (module docstring), the procedure chosen; curves : the pooled curve of every
+    procedure tried (``"both"`` tries the two); seconds : wall time; rigs_generated : rigs built
     (folds x candidates).
     """
 
@@ -79,6 +82,7 @@ class CrossValidation:
     seconds: float
     cpu_seconds: float
     candidates: str = "path"
+    curves: dict = dataclasses.field(default_factory=dict)
 
     @property
     def rigs_generated(self) -> int:
@@ -109,7 +113,8 @@ class CrossValidation:
                 "grid": list(self.grid), "errors": list(self.errors),
                 "fold_errors": [list(r) for r in self.fold_errors], "best_alpha": self.best_alpha,
                 "schedule": list(self.schedule), "folds": list(self.folds),
-                "candidates": self.candidates, "chain_iterations": self.chain_iterations, "seconds": self.seconds,
+                "candidates": self.candidates, "curves": {k: list(v) for k, v in self.curves.items()},
+                "chain_iterations": self.chain_iterations, "seconds": self.seconds,
                 "cpu_seconds": self.cpu_seconds}
 
 
@@ -167,32 +172,43 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
     lam_last = float(opts.lam[1])
     # the cross-validation's own runs: certified weights only, the candidate's schedule
     base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never")
-    num = np.zeros((folds, len(grid)))
+    modes = ("path", "cold") if candidates == "both" else (candidates,)
+    num = {mode: np.zeros((folds, len(grid))) for mode in modes}
     den = np.zeros(folds)
     pairs = generator.pairs
     for f in range(folds):
         train, held = np.flatnonzero(labels != f), np.flatnonzero(labels == f)
         sub = generator.subset(train).with_options(base)
         T_held = generator.problem.examples[held]
-        X = None
-        for c in range(len(grid) - 1, -1, -1):  # largest alpha first, then (path) continue downwards
-            a = grid[c]
-            if X is None or candidates == "cold":
-                res = sub.with_options(dataclasses.replace(base, alpha=(SCHEDULE_RATIO * a, a))).run()
-            else:
-                res = sub.run(X0=X, schedule=[(a, lam_last)] * chain)
-            X = res.weights
-            num[f, c], den[f] = heldout_error_parts(res.rig, T_held, pairs)
+
+        def score(mode, c, res):
+            num[mode][f, c], den[f] = heldout_error_parts(res.rig, T_held, pairs)
             if progress is not None:
-                progress(f, a, float(np.sqrt(num[f, c] / den[f])))
-    errors = np.sqrt(num.sum(0) / den.sum())
+                progress(f, grid[c], float(np.sqrt(num[mode][f, c] / den[f])))
+
+        top = sub.run()  # the largest alpha with its full schedule: the same rig in both modes
+        for mode in modes:
+            score(mode, len(grid) - 1, top)
+        X = top.weights
+        for c in range(len(grid) - 2, -1, -1):  # then downwards
+            a = grid[c]
+            if "path" in modes:  # warm-started from the previous candidate
+                res = sub.run(X0=X, schedule=[(a, lam_last)] * chain)
+                X = res.weights
+                score("path", c, res)
+            if "cold" in modes:  # from the rough weights, its own schedule
+                score("cold", c, sub.with_options(dataclasses.replace(base, alpha=(SCHEDULE_RATIO * a, a))).run())
+    curves = {mode: np.sqrt(num[mode].sum(0) / den.sum()) for mode in modes}
+    mode = min(modes, key=lambda mo: float(curves[mo].min()))  # "both": the procedure with the lower minimum
+    errors = curves[mode]
     best = int(np.argmin(errors))
     a = grid[best]
     return CrossValidation(grid=grid, errors=tuple(map(float, errors)),
-                           fold_errors=tuple(tuple(map(float, np.sqrt(num[f] / den[f]))) for f in range(folds)),
+                           fold_errors=tuple(tuple(map(float, np.sqrt(num[mode][f] / den[f]))) for f in range(folds)),
                            best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
                            chain_iterations=chain, seconds=time.perf_counter() - t0,
-                           cpu_seconds=time.process_time() - c0, candidates=candidates)
+                           cpu_seconds=time.process_time() - c0, candidates=mode,
+                           curves={mo: tuple(map(float, cu)) for mo, cu in curves.items()})
 
 
 __all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",

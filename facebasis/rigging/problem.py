@@ -117,7 +117,7 @@ class GenerationOptions:
     alpha and lambda go geometrically from their first to their last value over the iterations.
     ``alpha="auto"`` chooses the alpha schedule ``(5 a, a)`` (the paper's ratio) by k-fold
     cross-validation over the training expressions (:mod:`facebasis.rigging.crossval`; ``cv_folds``,
-    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"path"`` or ``"cold"``,
+    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"path"``, ``"cold"`` or ``"both"``,
     ``cv_chain_iterations``); the final run is made the way the chosen candidate was (with
     ``"path"``: the warm-started path down to it).
 
@@ -189,8 +189,8 @@ class GenerationOptions:
             raise InputError(f"cv_folds: expected >= 2, found {self.cv_folds}")
         if int(self.cv_chain_iterations) < 1:
             raise InputError(f"cv_chain_iterations: expected >= 1, found {self.cv_chain_iterations}")
-        if self.cv_candidates not in ("path", "cold"):  # crossval.CANDIDATE_MODES
-            raise InputError(f"cv_candidates: expected one of path, cold, found {self.cv_candidates!r}")
+        if self.cv_candidates not in ("path", "cold", "both"):  # crossval.CANDIDATE_MODES
+            raise InputError(f"cv_candidates: expected one of path, cold, both, found {self.cv_candidates!r}")
         grid = tuple(float(a) for a in self.cv_grid)
         if any(not np.isfinite(a) or a <= 0 for a in grid):
             raise InputError(f"cv_grid: expected final alphas > 0, found {self.cv_grid}")

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .weights import gram_data, solve_certified
+from .certify import certify_problem
+from .weightproblem import WeightProblem
 
 #: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect)
 DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
@@ -122,9 +123,8 @@ def heldout_error_parts(rig, expressions, pairs=()) -> tuple[float, float]:
     """(``||B_0 + B x - T||^2``, ``||T - B_0||^2``) summed over expressions (h, n, 3), with weights
     refitted by the certified solver (bounds + complementarity, no prior): the terms of
     :func:`~facebasis.rigging.generation.reproduction_error`."""
-    G, C, const = gram_data(rig, expressions)
-    sol = solve_certified(G, C, const, np.zeros((len(const), rig.n_shapes)), 0.0, pairs)
-    return max(float(sol.objective), 0.0), float(const.sum())
+    problem = WeightProblem.from_rig(rig, expressions, pairs)
+    return max(float(certify_problem(problem).objective), 0.0), float(problem.const.sum())
 
 
 def heldout_error(rig, expressions, pairs=()) -> float:

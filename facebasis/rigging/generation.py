@@ -50,7 +50,9 @@ from ..errors import InputError
 from ..geometry.gradients import frames_cm
 from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
-from .weights import WeightSolver, WeightSolution, eq5_objective, gram_data, solve_certified
+from .certify import certify_problem
+from .weightproblem import WeightProblem, WeightSolution
+from .weights import WeightSolver, eq5_objective  # noqa: F401 (eq5_objective re-exported)
 
 
 from .basis import (  # noqa: F401  (re-exported: the generation API in one place)
@@ -163,9 +165,7 @@ class BlendshapeGenerator:
     def transfer_weights(self) -> np.ndarray:
         """(m, k) weights of the training expressions fitted to the deformation transfer (certified,
         bounds + complementarity, no prior)."""
-        G, C = self.gram(self.transfer_rows())
-        m, k = self.problem.initial_weights.shape
-        return solve_certified(G, C, self.target_sq, np.zeros((m, k)), 0.0, self.pairs).weights
+        return certify_problem(self.weight_problem(self.transfer_rows(), 0.0, None)).X
 
     @property
     def unobserved(self) -> tuple[str, ...]:
@@ -211,22 +211,29 @@ class BlendshapeGenerator:
         return self._weight_solver
 
     def gram(self, Bv):
-        """``G = B^T B`` (k, k) and ``C = B^T t_j`` (k, m) from the reconstruction ``Bv`` (n, 3k)."""
+        """``G = B^T B`` (k, k) and ``c_j = B^T t_j`` as rows, (m, k), from the reconstruction ``Bv``
+        (n, 3k)."""
         k = self.problem.template.n_shapes
         cols = [Bv[:, d * k:(d + 1) * k] for d in range(3)]  # (n, k) strided views, no copy
         # one BLAS thread: on a busy machine OpenBLAS's threads made B^T T take 0.3 s instead of 9 ms
         with threadpool_limits(1):
             G = sum(B.T @ B for B in cols)
-            C = sum((T.T @ B).T for B, T in zip(cols, self.targets))
+            C = sum(T.T @ B for B, T in zip(cols, self.targets))
         return G, C
+
+    def weight_problem(self, Bv, lam: float, prior) -> WeightProblem:
+        """Eq. 5 for the training expressions against the blendshapes ``Bv`` (n, 3k) of
+        :meth:`reconstruct`, with the prior (m, k) or None (zeros) weighted by ``lam``."""
+        G, C = self.gram(Bv)
+        return WeightProblem(G, C, self.target_sq, self.pairs, prior, lam)
 
     def weight_step(self, Bv, lam, X0=None, ipopt: bool = True) -> WeightSolution:
         """Eq. 5 with the blendshapes ``Bv`` (n, 3k) of :meth:`reconstruct`: the CasADi/IPOPT model
         polished by the certified solver (``ipopt``), or the certified solver alone."""
-        G, C = self.gram(Bv)
+        problem = self.weight_problem(Bv, lam, self.problem.initial_weights)
         if ipopt:
-            return self.weight_solver.solve(G, C, self.target_sq, self.problem.initial_weights, lam, X0, free=self.free)
-        return solve_certified(G, C, self.target_sq, self.problem.initial_weights, lam, self.pairs, free=self.free)
+            return self.weight_solver.solve_problem(problem, X0, free=self.free)
+        return certify_problem(problem, free=self.free)
 
     def _runs_ipopt(self, it: int, total: int) -> bool:
         mode = self.options.ipopt
@@ -322,10 +329,9 @@ def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions 
 def refit_weights(rig: Rig, expressions: np.ndarray, pairs=(), lam: float = 0.0, prior=None,
                   solver: WeightSolver | None = None) -> WeightSolution:
     """Fit weights of given expressions (m, n, 3) to a rig (eq. 5 with an optional prior)."""
-    G, C, const = gram_data(rig, expressions)
-    prior = np.zeros((len(const), rig.n_shapes)) if prior is None else prior
-    solver = solver or WeightSolver(rig.n_shapes, len(const), pairs)
-    return solver.solve(G, C, const, prior, lam)
+    problem = WeightProblem.from_rig(rig, expressions, pairs, prior, lam)
+    solver = solver or WeightSolver(rig.n_shapes, problem.m, problem.pairs)
+    return solver.solve_problem(problem)
 
 
 def reproduction_error(rig: Rig, expressions: np.ndarray, pairs=(), solver: WeightSolver | None = None) -> float:

@@ -319,4 +319,8 @@ def test_rig_cli_contact_bad_inputs(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert "--contact: expected a mesh of at most 1000 vertices for the time budget" in err
     assert f"found {pp.problem.template.n_vertices}; run without --contact" in err
+    transfer = ["transfer", "--template", str(root / "template"), "--target", str(root / "target.obj"), "--out",
+                str(tmp_path / "out"), "--contact"]
+    assert main(transfer) == 2
+    assert "--contact: expected a mesh of at most 1000 vertices" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()

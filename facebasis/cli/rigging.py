@@ -22,6 +22,10 @@ def cmd_transfer(args) -> int:
     target = load_target_neutral(args.target, template)
     if args.contact_exclude:
         template.index(args.contact_exclude, what="--contact-exclude")
+    if args.contact:
+        from ..contact.exact import check_size
+
+        check_size(template.n_vertices, what="--contact")
     ve = virtual_edges_for(args, template)
     t0 = time.perf_counter()
     dt = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,

@@ -53,7 +53,7 @@ References
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -83,7 +83,8 @@ class ContactShape:
     """Per-shape report. ``new_pairs_left`` is the exact count after the last solve (0 = guarantee
     met); ``min_distance`` the smallest distance between constrained triangles in the result (nan
     without constraints); ``iterations`` solve-and-check rounds; ``solver_iterations`` DAQP
-    active-set iterations summed over rounds; ``moved`` vertices in the region allowed to move."""
+    active-set iterations summed over rounds; ``moved`` vertices in the region allowed to move;
+    ``fallback`` solved with the transfer energy alone after the stiff energy left pairs."""
 
     name: str
     excluded: bool = False
@@ -96,6 +97,7 @@ class ContactShape:
     moved: int = 0
     min_distance: float = float("nan")
     seconds: float = 0.0
+    fallback: bool = False
 
 
 @dataclass(frozen=True)
@@ -126,7 +128,7 @@ class ContactResult:
                 continue
             lines.append(f"{s.name:18s} {s.plain_new_pairs:6d} {s.new_pairs_left:5d} {s.constrained_pairs:6d} "
                          f"{s.rows:5d} {s.iterations:6d} {s.solver_iterations:7d} {s.moved:6d} "
-                         f"{s.min_distance:9.4f} {s.seconds:6.2f}")
+                         f"{s.min_distance:9.4f} {s.seconds:6.2f}" + ("  (transfer energy)" if s.fallback else ""))
         return "\n".join(lines)
 
 
@@ -166,6 +168,7 @@ class ContactSolver:
         self.tau = STILL_EDGES * h
         self.L = normal_matrix(dt, stiffness)
         self.stiffness = float(stiffness)
+        self._L0 = None  # the transfer energy alone, for the fallback (built when first needed)
         self.is_anchor = np.zeros(self.n, bool)
         self.is_anchor[dt.anchors] = True
         self.tree = cKDTree(self.B0)
@@ -190,7 +193,22 @@ class ContactSolver:
 
     # --- one shape --------------------------------------------------------------------------------
     def correct(self, name: str, d_plain: np.ndarray, template_delta: np.ndarray):
-        """The corrected delta (n, 3) of one shape and its :class:`ContactShape` report."""
+        """The corrected delta (n, 3) of one shape and its :class:`ContactShape` report.
+
+        With ``stiffness`` > 0, a shape that keeps new pairs after ``max_iterations`` rounds is solved
+        again with the transfer energy alone (``stiffness`` 0), whose smooth corrections disturb fewer
+        neighbouring pairs; that answer is kept if it leaves fewer new pairs (``fallback`` in the report).
+        """
+        d, rep = self._correct(name, d_plain, template_delta, self.L)
+        if rep.new_pairs_left and self.stiffness > 0:
+            if self._L0 is None:
+                self._L0 = normal_matrix(self.dt)
+            d0, rep0 = self._correct(name, d_plain, template_delta, self._L0)
+            if rep0.new_pairs_left < rep.new_pairs_left:
+                return d0, replace(rep0, fallback=True, seconds=rep.seconds + rep0.seconds)
+        return d, rep
+
+    def _correct(self, name, d_plain, template_delta, L):
         import daqp
 
         t0 = time.perf_counter()
@@ -238,7 +256,7 @@ class ContactSolver:
                 if chol is None or len(R_new) != len(R):
                     R = R_new
                     if self.solver == "daqp":
-                        chol = Cholesky(self.L[R][:, R])
+                        chol = Cholesky(L[R][:, R])
                     else:
                         chol = True
                 if self.solver == "daqp":
@@ -266,7 +284,7 @@ class ContactSolver:
                 # the same QP over R's corrections (3 |R| unknowns, sparse), by ADMM (OSQP's splitting)
                 x0 = np.zeros((len(R), 3)) if x is None or len(x) != len(R) else x
                 y0 = None if dual is None else np.concatenate([dual, np.zeros(c - len(dual))])
-                x, dual, n_it = self._admm_rows(P, pairs, normals, delta, active, R, x0, y0)
+                x, dual, n_it = self._admm_rows(L, P, pairs, normals, delta, active, R, x0, y0)
                 qp_iters += n_it
             X = P.copy()
             X[R] += x
@@ -278,7 +296,7 @@ class ContactSolver:
                 break
         if (self.polish and self.solver == "admm" and len(left) == 0 and x is not None and len(pairs)
                 and np.linalg.norm(x) > POLISH_RATIO * np.linalg.norm(d_plain[R])):
-            X, x, extra = self._polish(name, P, S, X, x, dual, pairs, normals, delta, active, C, R)
+            X, x, extra = self._polish(L, P, S, X, x, pairs, normals, delta, active, R)
             it += extra[0]
             qp_iters += extra[1]
         d = d_plain.copy()
@@ -288,17 +306,17 @@ class ContactSolver:
         return d, ContactShape(name, False, plain_new, len(left), len(pairs), len(active), it, qp_iters, len(R),
                                float(dist.min()) if len(dist) else float("nan"), time.perf_counter() - t0)
 
-    def _admm_rows(self, P, pairs, normals, delta, active, R, x, dual):
+    def _admm_rows(self, L, P, pairs, normals, delta, active, R, x, dual):
         """The separation QP over R's corrections for the given rows, by ADMM: x (|R|, 3), duals, iterations."""
         A, g = separation_rows(self.F, pairs, normals, delta, active, P, R)
         c = len(active)
         AR = sp.hstack(A).tocsr()
         xs = x.T.ravel().copy()
         ys = np.zeros(c) if dual is None or len(dual) != c else dual
-        xs, dual, n_it = admm(self.L[R][:, R], AR, g, delta[active // 9], xs, ys)
+        xs, dual, n_it = admm(L[R][:, R], AR, g, delta[active // 9], xs, ys)
         return xs.reshape(3, len(R)).T, dual, n_it
 
-    def _polish(self, name, P, S, X, x, dual, pairs, normals, delta, active, C, R):
+    def _polish(self, L, P, S, X, x, pairs, normals, delta, active, R):
         """Separating planes re-derived from the last solution: the planes of the target neutral
         over-constrain under large rotations (blinks), while any plane that separates a pair keeps it
         apart. For every constrained pair apart by at least its margin in X, the plane through X's
@@ -315,14 +333,14 @@ class ContactSolver:
             normals2 = np.where(ok[:, None], nrm, normals)
             vals = self._row_values(P, pairs, normals2, delta)
             active2 = np.union1d(np.flatnonzero(vals.ravel() < -0.5 * np.repeat(delta, 9)), active)
-            x2, dual2, n_it = self._admm_rows(P, pairs, normals2, delta, active2, R, x, None)
+            x2, dual2, n_it = self._admm_rows(L, P, pairs, normals2, delta, active2, R, x, None)
             rounds += 1
             qp += n_it
             X2 = P.copy()
             X2[R] += x2
             if len(new_pairs(X2, F, (self.B0, S), faces=touch)):
                 break
-            improved = (x2 * (self.L[R][:, R] @ x2)).sum() < (x * (self.L[R][:, R] @ x)).sum()
+            improved = (x2 * (L[R][:, R] @ x2)).sum() < (x * (L[R][:, R] @ x)).sum()
             X, x, normals, active = X2, x2, normals2, active2
             if not improved:
                 break

@@ -38,6 +38,7 @@ CASES = [
     ("rig {rig} --exclusive jawOpen", "--exclusive: expected SHAPE_A:SHAPE_B, found 'jawOpen'"),
     ("rig {rig} --exclusive jawOpen:jawShut", "unknown blendshape names ['jawShut']"),
     ("rig {rig} --exclusive jawOpen:jawOpen", "expected two different shapes, found one twice"),
+    ("rig {rig} --alpha auto --cv-candidates warm", "--cv-candidates: invalid choice: 'warm'"),
     ("rig {rig} --contact-allow-target-pairs", "--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none"),
     ("rig {rig} --contact --contact-exclude noSuchShape", "noSuchShape"),
     ("transfer --template {d}/template --target {d}/target.obj --contact-allow-target-pairs --out {o}", "expected --contact as well"),

@@ -76,7 +76,8 @@ def _rig_options(args):
     return GenerationOptions(iterations=args.iterations, alpha=_alpha_option(args.alpha),
                              lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
                              virtual_mode=args.virtual_mode, ipopt=args.ipopt, unobserved=args.unobserved,
-                             support=args.support, cv_folds=args.cv_folds, cv_grid=_cv_grid(args.cv_grid))
+                             support=args.support, cv_folds=args.cv_folds, cv_grid=_cv_grid(args.cv_grid),
+                             cv_candidates=args.cv_candidates)
 
 
 def _progress(rec, total):
@@ -370,6 +371,11 @@ def register(sub) -> None:
     p.add_argument("--cv-grid", action="extend", nargs="+", default=[], metavar="ALPHA",
                    help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
                         f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
+    p.add_argument("--cv-candidates", choices=("path", "cold", "both"), default=defaults.cv_candidates,
+                   help="--alpha auto: each fold's candidates along one warm-started path and the final run along "
+                        "the same path down to the chosen alpha (path), every candidate from the rough weights with "
+                        "its own schedule (cold, about 3.5x the cost), or both curves and the lower one (both; "
+                        f"default {defaults.cv_candidates})")
     p.add_argument("--resume", default=None, metavar="RUN_DIR",
                    help="add the training expressions of --examples/--weights to this finished run and warm-start "
                         "from its blendshapes and weights (template and target default to the run's)")

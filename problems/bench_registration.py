@@ -20,7 +20,8 @@ the registered mesh and the true mesh in the scan's frame, on the face region (I
 0..9408), in cm: median, 95th percentile, max, and its parts along the true normal and along the
 surface; for expressions also the error against the registered neutral plus the true expression
 delta; with and without the 68 landmarks (given as 3D points on the scan, the true landmark
-positions plus the same noise). Timed per scan: wall and CPU seconds, load average.
+positions plus the same noise). For expressions also how much of the motion a closest-point term can
+see (:func:`motion_visibility`). Timed per scan: wall and CPU seconds, load average.
 With ``--rig M`` a rig is generated from M registered training scans and from the exact examples
 and their held-out reproduction errors compared (:func:`rig_comparison`).
 """
@@ -124,6 +125,23 @@ def _measure(res, truth, face, normals, relative_to=None) -> dict:
     return row
 
 
+def motion_visibility(B0: np.ndarray, Vt: np.ndarray, S: np.ndarray, G: np.ndarray, R: np.ndarray,
+                      t: np.ndarray, face: np.ndarray) -> dict:
+    """How much of an expression's motion a closest-point data term can see.
+
+    ``motion``: |true expression vertex - true neutral vertex| on the face region; ``visible``: the
+    distance of the true neutral, in the scan's true pose, to the expression scan's surface, i.e. what
+    the data term measures before the non-rigid stage moves anything. The difference is motion along
+    the surface (a jaw rotating about a hinge ~10 cm away moves the chin mostly along its own
+    surface): only features (rims, curvature, landmarks) can show it. Returns 95th percentiles (cm).
+    """
+    from facebasis.geometry.nricp import ScanSurface
+
+    d = ScanSurface(S, G).closest(B0[face] @ R.T + t)[2]
+    m = np.linalg.norm(Vt[face] - B0[face], axis=1)
+    return {"motion_p95": float(np.percentile(m, 95)), "visible_p95": float(np.percentile(d, 95))}
+
+
 def _timed(fn, *args, **kwargs):
     import os
 
@@ -156,6 +174,8 @@ def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", 
                     "cpu_seconds": cpu, "load": load})
         rows.append(row)
         rel = (f" | rel median {row['rel_median']:.4f} p95 {row['rel_p95']:.4f}" if "rel_median" in row else "")
+        if "motion_p95" in row:
+            rel += f" | motion p95 {row['motion_p95']:.4f} visible p95 {row['visible_p95']:.4f}"
         log(f"seed {row['seed']} {row['template']:8s} {row['scan']:18s} lm={row['landmarks']:3s} err median "
             f"{row['err_median']:.4f} p95 {row['err_p95']:.4f} max {row['err_max']:.3f} | normal "
             f"{row['normal_median']:.4f}/{row['normal_p95']:.4f} tangential {row['tangential_median']:.4f}/"
@@ -173,7 +193,7 @@ def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", 
             S, G, R, t = make_scan(Vt, F, keep, ears, rng)
             truth = Vt @ R.T + t
             lm_pts = truth[lm68] + 0.02 * rng.standard_normal((len(lm68), 3))
-            scans.append((nm, S, G, R, t, Vt, truth, lm_pts))
+            scans.append((nm, S, G, R, t, Vt, truth, lm_pts, motion_visibility(B0, Vt, S, G, R, t, face)))
         if "generic" in templates:
             # the floor of correspondence ambiguity: the exact identity mesh (same topology, no remesh,
             # noise, holes or motion; without the mouth and eye sockets) from the generic template
@@ -209,7 +229,7 @@ def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", 
             for use_lm in landmarks:
                 reg_obj = Registration(tmpl, F, landmarks=lm68 if use_lm else None, name=f"{tname} template")
                 neutral = None
-                for nm, S, G, R, t, Vt, truth, lm_pts in scans:
+                for nm, S, G, R, t, Vt, truth, lm_pts, vis in scans:
                     res, sec, cpu, load = _timed(reg_obj.register, S, G, scan_landmarks=lm_pts if use_lm else None,
                                                     start=neutral, name=nm)
                     rel = None
@@ -218,7 +238,8 @@ def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", 
                     else:  # registered neutral in the ICT frame (true motion), + true delta, into this frame
                         rel = ((neutral - tn) @ Rn + (Vt - B0)) @ R.T + t
                     add({"seed": seed, "template": tname, "scan": nm, "landmarks": "yes" if use_lm else "no",
-                         "scan_vertices": len(S), **_measure(res, truth, face, normals_of(truth), rel)},
+                         "scan_vertices": len(S), **_measure(res, truth, face, normals_of(truth), rel),
+                         **(vis if nm != "neutral" else {})},
                         res, sec, cpu, load)
                 if quick:
                     break
@@ -340,15 +361,20 @@ def write_tables(rows, out: Path, rig: dict | None = None) -> None:
              "on the true surface.", "",
              "err = registered vertex vs true vertex (scan frame, the issue's metric), split into its part "
              "along the true normal (off the surface) and across it (along the surface); rel = vs the "
-             "registered neutral + the true expression delta (consistency across the set).", "",
+             "registered neutral + the true expression delta (consistency across the set). motion p95 = 95th "
+             "percentile of |true expression - true neutral|; visible p95 = of the true neutral's distance (in the "
+             "scan's true pose) to the expression scan: the part of the motion a closest-point term can see, the "
+             "rest is motion along the surface.", "",
              "| seed | template | scan | landmarks | err median | err p95 | err max | normal median | normal p95 | "
-             "tangential median | tangential p95 | rel median | rel p95 | iterations | wall s | CPU s | load |",
-             "|" + "---|" * 17]
+             "tangential median | tangential p95 | rel median | rel p95 | motion p95 | visible p95 | iterations | "
+             "wall s | CPU s | load |",
+             "|" + "---|" * 19]
     for r in rows:
         lines.append(f"| {r['seed']} | {r['template']} | {r['scan']} | {r['landmarks']} | {f(r['err_median'])} | "
                      f"{f(r['err_p95'])} | {r['err_max']:.3f} | {f(r['normal_median'])} | {f(r['normal_p95'])} | "
                      f"{f(r['tangential_median'])} | {f(r['tangential_p95'])} | {f(r.get('rel_median'))} | "
-                     f"{f(r.get('rel_p95'))} | {r['iterations']} | {r['seconds']:.1f} | {r['cpu_seconds']:.1f} | "
+                     f"{f(r.get('rel_p95'))} | {f(r.get('motion_p95'))} | {f(r.get('visible_p95'))} | "
+                     f"{r['iterations']} | {r['seconds']:.1f} | {r['cpu_seconds']:.1f} | "
                      f"{r['load']:.1f} |")
     if rig:
         lines += ["", f"Rig from {rig['n_train']} registered training scans (generic template, no landmarks) vs "

@@ -319,3 +319,22 @@ def test_point_to_plane_refinement_converges_from_far_off():
     assert abs(sim.scale - 1.2) < 1e-6
     short, _ = refine_point_to_plane(V, surface.closest, start, 15)
     assert np.abs(short.apply(V) - true.apply(V)).max() > 1e-3
+
+
+def test_motion_visibility_separates_motion_along_the_surface_from_motion_off_it():
+    """The benchmark's diagnosis of expression errors: a closest-point term sees only the part of a
+    motion that leaves the surface. A sphere turned about its centre (all motion along the surface)
+    is invisible; the same sphere inflated by 10% (all motion off the surface) is fully visible."""
+    from problems.bench_registration import motion_visibility
+
+    V, F = icosphere(3)
+    S, G = uv_sphere((60, 60))
+    a = np.radians(20)
+    Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    R, t = random_rotation(np.random.default_rng(3)), np.array([1.0, -2.0, 0.5])
+    face = np.arange(len(V))
+    turned = motion_visibility(V, V @ Rz.T, S @ Rz.T @ R.T + t, G, R, t, face)
+    assert turned["motion_p95"] > 0.3
+    assert turned["visible_p95"] < 0.05 * turned["motion_p95"]
+    inflated = motion_visibility(V, 1.1 * V, 1.1 * S @ R.T + t, G, R, t, face)
+    assert abs(inflated["visible_p95"] - inflated["motion_p95"]) < 0.2 * inflated["motion_p95"]

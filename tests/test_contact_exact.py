@@ -1,5 +1,7 @@
 """Exact contact for deformation transfer: separating planes iterated with the exact counter."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -324,3 +326,41 @@ def test_rig_cli_contact_bad_inputs(tmp_path, capsys, monkeypatch):
     assert main(transfer) == 2
     assert "--contact: expected a mesh of at most 1000 vertices" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_generate_blendshapes_contact_api():
+    """``generate_blendshapes(..., contact=True)``: the Python form of ``rig --contact``; the contact
+    inputs are checked before generation, the result carries the ContactResult and certified weights."""
+    from facebasis.errors import RigError
+    from facebasis.rigging.certify import certify_problem
+    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.synthetic import default_face_problem
+    from facebasis.rigging.weightproblem import WeightProblem
+
+    pp = default_face_problem(seed=0, n_train=6)
+    options = GenerationOptions(iterations=1, ipopt="never")
+    with pytest.raises(InputError, match="contact_exclude / allow_target_pairs: expected contact=True as well"):
+        generate_blendshapes(pp.problem, options, contact_exclude=("jawOpen",))
+    with pytest.raises(RigError, match=r"contact_exclude: unknown blendshape names \['noSuchShape'\]"):
+        generate_blendshapes(pp.problem, options, contact=True, contact_exclude=("noSuchShape",))
+    jaw = pp.truth.deltas[pp.truth.names.index("jawOpen")]
+    closed = dataclasses.replace(pp.problem, target_neutral=pp.problem.target_neutral - 0.5 * jaw)
+    with pytest.raises(InputError, match="contact: target neutral: expected no intersecting triangle pairs"):
+        generate_blendshapes(closed, options, contact=True)
+    res = generate_blendshapes(pp.problem, options, contact=True)
+    assert res.contact is not None and res.contact.ok
+    template = pp.problem.template
+    for name, D in zip(res.rig.names, res.rig.deltas):
+        i = template.names.index(name)
+        rep = penetration_report(res.rig.neutral + D, template.faces,
+                                 references=(res.rig.neutral, template.neutral + template.deltas[i]))
+        assert len(rep.new) == 0, name
+    # the weights are the certified optimum of the final weight step for the corrected shapes
+    names = list(template.names)
+    pairs = [(names.index(a), names.index(b)) for a, b in pp.problem.exclusive]
+    free = np.array([n not in res.unobserved for n in names])
+    problem = WeightProblem.from_rig(res.rig, pp.problem.examples, pairs, pp.problem.initial_weights,
+                                     options.schedule()[-1][1])
+    best = certify_problem(problem, free=free)
+    np.testing.assert_allclose(res.weights, best.X, atol=1e-12)
+    assert problem.complementarity(res.weights).max() == 0.0 and problem.bounds(res.weights).max() == 0.0

@@ -163,7 +163,9 @@ def cmd_rig(args) -> int:
               f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {min(cv.errors):.4f})")
     contact = None
     if args.contact:
-        contact, result = _contact_generation(gen, result, args.contact_exclude, args.contact_allow_target_pairs)
+        from ..rigging.contactstep import contact_generation
+
+        contact, result = contact_generation(gen, result, args.contact_exclude, args.contact_allow_target_pairs)
     sources = {"template": args.template, "neutral": args.neutral, "exclude": list(args.exclude),
                "target": args.target}
     with atomic_directory(args.out) as stage:
@@ -187,33 +189,6 @@ def _contact_verdict(contact, what: str, excluded) -> int:
     print(f"exact check: no {what} shape has a triangle pair intersecting that does not intersect in the "
           "target neutral or in the template shape" + (f" (excluded: {', '.join(excluded)})" if excluded else ""))
     return 0
-
-
-def _contact_generation(gen, result, exclude, allow_target_pairs=False):
-    """Exact contact on the generated rig: each shape moved by the smallest displacement (smoothed by
-    the generator's transfer energy, virtual edges included) so that no new triangle pair intersects
-    (see :func:`facebasis.contact.exact.contact_correct`); the final weight step is solved again for
-    the corrected shapes and the training residuals recomputed."""
-    import dataclasses
-
-    import numpy as np
-
-    from ..contact.exact import contact_correct
-    from ..rigging.generation import relative_residuals
-    from ..rigging.weights import gram_data, solve_certified
-
-    contact = contact_correct(result.rig, gen.problem.template, transfer=gen.dt, exclude=exclude,
-                              allow_target_pairs=allow_target_pairs)
-    # the stored weights must be the certified optimum for the blendshapes actually written (so that
-    # `facebasis verify` certifies the run): one more eq. 5 step, at the run's final lambda
-    G, C, const = gram_data(contact.rig, gen.problem.examples)
-    final_lam = gen.options.schedule()[-1][1]
-    sol = solve_certified(G, C, const, gen.problem.initial_weights, final_lam, gen.pairs, free=gen.free)
-    residuals = relative_residuals(contact.rig, gen.problem.examples, sol.weights)
-    threshold = result.options.missing_threshold if result.options is not None else np.inf
-    missing = tuple(n for n, r in zip(result.example_names, residuals) if r > threshold)
-    return contact, dataclasses.replace(result, rig=contact.rig, weights=sol.weights, residuals=residuals,
-                                        missing=missing)
 
 
 def _cmd_rig_resume(args) -> int:

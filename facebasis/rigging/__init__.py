@@ -21,9 +21,12 @@ runs           writing a generation run as a rig folder (weights, history, resid
 verify         re-certify the stored weights of a run folder
 crossval       automatic regularisation: k-fold cross-validation of alpha (``alpha="auto"``)
 enrich         incremental enrichment: resume a finished run with more training expressions
+contactstep    exact contact on the generated shapes (``contact=True``, ``rig --contact``) and the
+               final weight step solved again for them
 synthetic      person problems with known answers built from the built-in face
 
-May import :mod:`facebasis.contact` (the virtual-edge energy inside generation).
+May import :mod:`facebasis.contact` (the virtual-edge energy inside generation, exact contact in
+``contactstep``).
 
 References
 ----------

@@ -319,10 +319,27 @@ def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndar
 
 
 def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions | None = None,
-                         progress=None) -> GenerationResult:
-    """Example-based blendshape generation (Gao et al. 2015): precompute, alternate, return the result."""
+                         progress=None, *, contact: bool = False, contact_exclude=(),
+                         allow_target_pairs: bool = False) -> GenerationResult:
+    """Example-based blendshape generation (Gao et al. 2015): precompute, alternate, return the result.
+
+    ``contact=True`` then makes the generated shapes intersection-free (exact contact,
+    :func:`facebasis.rigging.contactstep.contact_generation`: no triangle pair intersects unless it
+    does in the target neutral or in the template shape; ``contact_exclude`` names shapes left as
+    generated) and re-solves the final weight step; the :class:`~facebasis.contact.exact.ContactResult`
+    is ``result.contact`` (check ``result.contact.ok``).
+    """
+    if contact:  # the contact inputs are checked before any solving starts
+        from .contactstep import check_contact_inputs, contact_generation
+
+        check_contact_inputs(problem, contact_exclude, allow_target_pairs)
+    elif contact_exclude or allow_target_pairs:
+        raise InputError("contact_exclude / allow_target_pairs: expected contact=True as well, found contact=False")
     gen = BlendshapeGenerator(problem, options)
     res = gen.run(progress)
+    if contact:
+        found, res = contact_generation(gen, res, contact_exclude, allow_target_pairs)
+        res = dataclasses.replace(res, contact=found)
     return res
 
 

@@ -249,6 +249,7 @@ class GenerationResult:
     options : the options the alternation ran with (``alpha="auto"`` resolved to its choice)
     unobserved : names of the shapes without support in the examples (kept at their transfer)
     crossval : the :class:`~facebasis.rigging.crossval.CrossValidation` behind ``alpha="auto"``, else None
+    contact : the :class:`~facebasis.contact.exact.ContactResult` of ``contact=True``, else None
     """
 
     rig: Rig
@@ -262,6 +263,7 @@ class GenerationResult:
     options: "GenerationOptions | None" = None
     unobserved: tuple[str, ...] = ()
     crossval: object | None = None
+    contact: object | None = None
 
     @property
     def all_ipopt_succeeded(self) -> bool:

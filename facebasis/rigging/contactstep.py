@@ -1,0 +1,74 @@
+"""Exact contact after example-based generation: the generated shapes made intersection-free.
+
+The rig of :func:`~facebasis.rigging.generation.generate_blendshapes` is corrected shape by shape
+by :func:`facebasis.contact.exact.contact_correct` (Li, Shen, Liu 2023 extended to an exact
+guarantee: no triangle pair intersects in a generated shape unless it intersects in the target
+neutral or in the template shape; checked by the package's exact counter after every solve). The
+stored weights must then be the certified optimum of eq. 5 (Gao et al. 2015) for the shapes
+actually written, so the final weight step is solved once more at the run's final lambda and the
+training residuals are recomputed. This module is the stated interface through which rigging uses
+contact.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .certify import certify_problem
+from .generation import BlendshapeGenerator, relative_residuals
+from .problem import GenerationResult
+from .weightproblem import WeightProblem
+
+
+def check_contact_inputs(problem, exclude=(), allow_target_pairs: bool = False, what: str = "contact") -> None:
+    """What exact contact needs, checked before generation starts: known shape names in
+    ``exclude``, a mesh within the time budget, and a target neutral that does not intersect itself
+    beyond the template neutral (unless ``allow_target_pairs``). Raises InputError naming the
+    option (``what``) and the pairs."""
+    from ..contact.exact import check_size, check_target_neutral
+
+    if exclude:
+        problem.template.index(list(exclude), what=f"{what}_exclude")
+    check_size(problem.template.n_vertices, what=what)
+    check_target_neutral(problem.target_neutral, problem.template, allow_target_pairs, what=f"{what}: target neutral")
+
+
+def contact_generation(generator: BlendshapeGenerator, result: GenerationResult, exclude=(),
+                       allow_target_pairs: bool = False, **contact_options):
+    """Correct a generation result for exact contact and re-solve its final weight step.
+
+    Parameters
+    ----------
+    generator : the :class:`BlendshapeGenerator` that made ``result`` (its transfer energy smooths
+        the correction; its examples, prior, pairs and unobserved shapes define the weight step).
+    result : the generation result; its rig's neutral is the target neutral ``B_0``.
+    exclude : shape names left as generated (correctives meant to press layers together).
+    allow_target_pairs : accept a target neutral that intersects itself where the template neutral
+        does not (those pairs stay allowed); otherwise that is an :class:`InputError` naming them.
+    contact_options : passed to :func:`facebasis.contact.exact.contact_correct` (``stiffness``,
+        ``max_iterations``, ``workers``, ...).
+
+    Returns
+    -------
+    (contact, result) : the :class:`~facebasis.contact.exact.ContactResult` (per-shape rounds, QP
+        iterations, smallest distance kept, pairs left; ``contact.ok``) and the result with the
+        corrected rig, the re-solved weights (m, k), residuals (m,) and missing examples.
+    """
+    from ..contact.exact import contact_correct
+
+    contact = contact_correct(result.rig, generator.problem.template, transfer=generator.dt, exclude=exclude,
+                              allow_target_pairs=allow_target_pairs, **contact_options)
+    final_lam = generator.options.schedule()[-1][1]
+    problem = WeightProblem.from_rig(contact.rig, generator.problem.examples, generator.pairs,
+                                     generator.problem.initial_weights, final_lam)
+    weights = certify_problem(problem, free=generator.free).X
+    residuals = relative_residuals(contact.rig, generator.problem.examples, weights)
+    threshold = result.options.missing_threshold if result.options is not None else np.inf
+    missing = tuple(n for n, r in zip(result.example_names, residuals) if r > threshold)
+    return contact, dataclasses.replace(result, rig=contact.rig, weights=weights, residuals=residuals,
+                                        missing=missing)
+
+
+__all__ = ["check_contact_inputs", "contact_generation"]

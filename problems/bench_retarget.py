@@ -78,7 +78,9 @@ def bench_weights(rig, idx, active, pairs, mask, frames: int, log=print):
         for smooth in (0.0, SMOOTH):
             for use_pairs in (False, True):
                 solver = RigRetargeter(rig, idx, pairs if use_pairs else (), smooth=smooth)
+                c0 = time.process_time()
                 res = solver.run(cap.landmarks, fps=cap.fps)
+                cpu = time.process_time() - c0
                 err = np.abs(res.weights - X)
                 vmean, v99 = vertex_error(rig, X, res.weights, mask)
                 row = {"noise_px": noise, "smooth": smooth, "exclusive_pairs": len(pairs) if use_pairs else 0,
@@ -87,16 +89,52 @@ def bench_weights(rig, idx, active, pairs, mask, frames: int, log=print):
                        "weight_max_animated": float(err[:, act].max()),
                        "vertex_err_mean": vmean, "vertex_err_p99": v99,
                        "landmark_rms_px": float(np.mean(res.residual)),
-                       "ms_per_frame": 1e3 * res.seconds / frames,
+                       "ms_per_frame": 1e3 * res.seconds / frames, "cpu_ms_per_frame": 1e3 * cpu / frames,
                        "max_pair_product": float(np.max(np.abs(res.weights[:, rig.index([a for a, _ in pairs])]
                                                                * res.weights[:, rig.index([b for _, b in pairs])])))}
                 rows.append(row)
                 log("  noise {noise_px:.1f} px, smooth {smooth:g}, pairs {exclusive_pairs:2d}: weight MAE "
                     "{weight_mae_all:.4f} (animated {weight_mae_animated:.4f}), vertex error {vertex_err_mean:.4f} "
-                    "mean / {vertex_err_p99:.4f} p99, {ms_per_frame:.2f} ms/frame".format(**row))
+                    "mean / {vertex_err_p99:.4f} p99, {ms_per_frame:.2f} ms/frame ({cpu_ms_per_frame:.2f} CPU)".format(**row))
                 if noise == 1.0 and use_pairs:
                     curves[smooth] = res.weights
     return X, rows, curves
+
+
+def bench_identity(rig, idx, active, pairs, frames: int, seeds=(1, 2, 3), log=print) -> list[dict]:
+    """Captures of other faces: ICT random identities (the person's neutral) animated by the rig's own
+    expression deltas, 0.5 px noise; the weights recovered with identity "rig", "first-frame" and
+    "auto". Each capture is run twice: starting on the neutral face, and starting on an expression
+    (jawOpen 0.6 and mouthSmile_L 0.5 over the first 10 frames). ICT only (the identity modes are
+    used to make the test faces, never by the method)."""
+    from problems.ict import ict_random_identity
+
+    X0 = smooth_weight_curves(rig.names, active, frames, seed=21)
+    rows = []
+    for seed in seeds:
+        _, neutral = ict_random_identity(seed)
+        person = rig.with_neutral(neutral, rig.deltas, f"identity {seed}")
+        for start in ("neutral", "expression"):
+            X = X0.copy()
+            if start == "neutral":
+                X[:10] = 0.0
+            else:
+                X[:10, rig.names.index("jawOpen")] = 0.6
+                X[:10, rig.names.index("mouthSmile_L")] = 0.5
+            cap = synthetic_capture(person, idx, X, noise_px=0.5, seed=seed, scale=20.0, amplitude_deg=5.0)
+            for identity in ("rig", "first-frame", "auto"):
+                c0 = time.process_time()
+                res = RigRetargeter(rig, idx, pairs, smooth=SMOOTH, identity=identity).run(cap.landmarks, fps=cap.fps)
+                cpu = time.process_time() - c0
+                row = {"identity_seed": seed, "start": start, "identity": identity,
+                       "weight_mae_all": float(np.abs(res.weights - X).mean()),
+                       "weights_over_05_when_true_0": float(np.mean(res.weights[X == 0] > 0.5)),
+                       "landmark_rms_px": float(np.mean(res.residual)), "cpu_ms_per_frame": 1e3 * cpu / frames}
+                rows.append(row)
+                log("  identity {identity_seed}, starts on {start}, --identity {identity}: weight MAE "
+                    "{weight_mae_all:.4f}, landmark rms {landmark_rms_px:.2f} px, {cpu_ms_per_frame:.2f} ms/frame "
+                    "CPU".format(**row))
+    return rows
 
 
 def bench_warp(n_frames: int = 200, log=print) -> dict:
@@ -124,12 +162,15 @@ def bench_warp(n_frames: int = 200, log=print) -> dict:
         anim = CartoonAnimator(face.image, lm, lm, V0, F, border=border)
         meshes = anim.mesh(V0[None] + motion)
         anim.warp(meshes[0])
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for m in meshes:
             anim.warp(m)
         ms = 1e3 * (time.perf_counter() - t0) / n_frames
+        cpu = 1e3 * (time.process_time() - c0) / n_frames
         out[f"warp_ms_border_{border:g}"] = ms
-        log(f"  2D warp 512x512, {len(V0)} vertices / {len(F)} triangles, static band {border:g}: {ms:.2f} ms/frame")
+        out[f"warp_cpu_ms_border_{border:g}"] = cpu
+        log(f"  2D warp 512x512, {len(V0)} vertices / {len(F)} triangles, static band {border:g}: {ms:.2f} ms/frame "
+            f"({cpu:.2f} CPU)")
     return out
 
 
@@ -202,6 +243,7 @@ def main(argv=None) -> int:
     weak = ident.weak()
     print(f"shapes the landmarks cannot tell apart or barely see ({len(weak)}): {', '.join(weak)}")
     X, rows, curves = bench_weights(rig, idx, active, pairs, mask, frames)
+    identity_rows = bench_identity(rig, idx, active, pairs, frames) if name.startswith("ICT") else []
     warp = bench_warp()
     check = None if args.quick else cli_check(rig, idx, pairs)
     # tables
@@ -220,17 +262,39 @@ def main(argv=None) -> int:
           f"weak-perspective camera at 20 px/{unit.split()[0]}, head rotation up to 10 degrees; animated shapes: "
           f"{', '.join(active)}. Weight error: mean |x - x_true| (weights in [0, 1]); vertex error: per-vertex "
           f"distance of the reconstructed face (face region) to the true one, {unit}; smooth = temporal term mu; "
-          f"ridge set from each capture's landmark noise (--ridge auto, the default; 1e-3 on noise-free data).", "",
+          f"ridge set from each capture's landmark noise (--ridge auto, the default; 1e-3 on noise-free data); "
+          f"--identity auto (the default; on these captures of the rig's own face it applies no offset). ms/frame "
+          f"is wall time of the whole run (pilot included), CPU ms/frame its process time (the machine is shared).", "",
           "| noise (px) | smooth | pairs | weight MAE all | weight MAE animated | vertex err mean | vertex err p99 | "
-          "landmark rms (px) | ms/frame |", "|---|---|---|---|---|---|---|---|---|"]
+          "landmark rms (px) | ms/frame | CPU ms/frame |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r['noise_px']:.1f} | {r['smooth']:g} | {r['exclusive_pairs']} | {r['weight_mae_all']:.4f} | "
                   f"{r['weight_mae_animated']:.4f} | {r['vertex_err_mean']:.4f} | {r['vertex_err_p99']:.4f} | "
-                  f"{r['landmark_rms_px']:.3f} | {r['ms_per_frame']:.2f} |")
+                  f"{r['landmark_rms_px']:.3f} | {r['ms_per_frame']:.2f} | {r['cpu_ms_per_frame']:.2f} |")
+    if identity_rows:
+        with (out / "identity_table.csv").open("w", newline="") as fh:
+            w = csv.DictWriter(fh, list(identity_rows[0]))
+            w.writeheader()
+            w.writerows(identity_rows)
+        md += ["", "## Another face than the rig's (`--identity`)", "",
+               "ICT random identities 1-3 (`problems.ict.ict_random_identity`) as the person's neutral, animated by the "
+               "rig's expression deltas, 0.5 px noise, head rotation up to 5 degrees, smooth 0.05, the 12 pairs; the "
+               "capture starts on the neutral face or on an expression (jawOpen 0.6 + mouthSmile_L 0.5, 10 frames). "
+               "Mean over the 3 faces; false on = share of weights above 0.5 where the true weight is 0.", "",
+               "| starts on | identity | weight MAE all | false on | landmark rms (px) | CPU ms/frame |",
+               "|---|---|---|---|---|---|"]
+        for start in ("neutral", "expression"):
+            for identity in ("rig", "first-frame", "auto"):
+                sel = [r for r in identity_rows if r["start"] == start and r["identity"] == identity]
+                md.append(f"| {start} | {identity} | {np.mean([r['weight_mae_all'] for r in sel]):.4f} | "
+                          f"{np.mean([r['weights_over_05_when_true_0'] for r in sel]):.4f} | "
+                          f"{np.mean([r['landmark_rms_px'] for r in sel]):.2f} | "
+                          f"{np.mean([r['cpu_ms_per_frame'] for r in sel]):.2f} |")
     md += ["", "## 2D warp", "",
            f"Built-in cartoon at 512 x 512, {warp['capture_vertices']} capture vertices / {warp['capture_triangles']} "
            f"triangles: {warp['warp_ms_border_0.4']:.2f} ms/frame with the static band (default), "
-           f"{warp['warp_ms_border_0']:.2f} ms/frame without (target <= 10).", "",
+           f"{warp['warp_ms_border_0']:.2f} ms/frame without (target <= 10); CPU "
+           f"{warp['warp_cpu_ms_border_0.4']:.2f} / {warp['warp_cpu_ms_border_0']:.2f} ms/frame.", "",
            "## What 68 landmarks cannot tell apart", "",
            "independence = part of a shape's landmark motion that no combination of the other shapes and the head "
            "pose produces (0: indistinguishable without bounds and exclusive pairs); motion = rms landmark motion "

@@ -261,6 +261,7 @@ class RigRetargeter:
     def _weights(self, p, vis, s, R, t, x_prev, x_cur):
         """x | pose: the certified weight solve (eq. 5 form) of one frame."""
         from ..rigging.certify import CertifiedWeightSolver
+        from ..rigging.weightproblem import WeightProblem
 
         E = np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes)   # (2Lv, k)
         b = (((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1)                      # rig units
@@ -273,11 +274,11 @@ class RigRetargeter:
         c = E.T @ b
         lam = self.smooth + self.ridge
         prior = (self.smooth / lam) * x_prev            # mu||x - x_prev||^2 + rho||x||^2, completed square
-        const = float(b @ b)
+        problem = WeightProblem(G, c[None], np.array([b @ b]), self.pairs, prior[None], lam)   # eq. 5, one frame
         if self._ipopt is not None:
-            sol = self._ipopt.solve(G, c[:, None], np.array([const]), prior[None], lam, X0=x_cur[None])
-            return sol.weights[0], sol.certificate_nodes
-        sol = CertifiedWeightSolver(G, self.pairs, lam).solve(c, const, prior, start=x_cur)
+            sol = self._ipopt.solve_problem(problem, X0=x_cur[None])
+            return sol.X[0], sol.certificate_nodes
+        sol = CertifiedWeightSolver(problem).solve_example(0, start=x_cur)
         return sol.x, sol.nodes
 
     def solve_frame(self, p, visible=None, state=None):

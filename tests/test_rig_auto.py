@@ -198,3 +198,25 @@ def test_cold_candidates_do_not_depend_on_the_others():
     assert both.best_alpha == (0.01, 0.1, 10.0)[int(np.argmin(both.curves[chosen]))]
     with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, both, found 'warm'"):
         GenerationOptions(cv_candidates="warm")
+
+
+def test_one_iteration_auto_run_records_the_lambda_its_weights_were_solved_at(tmp_path, capsys):
+    """With ``--alpha auto`` the final run follows the cross-validated path, whose last alternation
+    is at the last lambda even with ``--iterations 1`` (where the options' own schedule ends at the
+    first): ``inputs.json`` must record the lambda actually used, so that `verify` certifies the run
+    and `--resume` continues from it."""
+    root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=6))
+    run = root / "auto1"
+    code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
+                 "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
+                 "--out", str(run), "--iterations", "1", "--alpha", "auto", "--cv-folds", "2",
+                 "--cv-grid", "0.01", "100"])
+    assert code == 0
+    hist = json.loads((run / "history.json").read_text())
+    inputs = json.loads((run / "inputs.json").read_text())
+    lams = [it["lam"] for it in hist["iterations"]]
+    assert len(lams) > 1 and lams[0] != lams[-1]          # the path: more alternations, lambda moved
+    assert inputs["final_lambda"] == lams[-1]
+    capsys.readouterr()
+    assert main(["verify", str(run)]) == 0
+    assert "certified optimal" in capsys.readouterr().out

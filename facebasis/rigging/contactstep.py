@@ -60,7 +60,7 @@ def contact_generation(generator: BlendshapeGenerator, result: GenerationResult,
 
     contact = contact_correct(result.rig, generator.problem.template, transfer=generator.dt, exclude=exclude,
                               allow_target_pairs=allow_target_pairs, **contact_options)
-    final_lam = generator.options.schedule()[-1][1]
+    final_lam = result.final_step[1]   # the lambda of the last alternation actually run
     problem = WeightProblem.from_rig(contact.rig, generator.problem.examples, generator.pairs,
                                      generator.problem.initial_weights, final_lam)
     weights = certify_problem(problem, free=generator.free).X

@@ -73,8 +73,19 @@ def rig_as_rows(rig: Rig) -> np.ndarray:
     return np.ascontiguousarray(rig.deltas.transpose(1, 2, 0)).reshape(rig.n_vertices, -1)
 
 
+def _final_step_from_history(run: Path):
+    """(alpha, lambda) of the finished run's last alternation (history.json), or None when it
+    recorded none (then the end of its options' schedule is used)."""
+    its = read_json(run / "history.json", "the run's history (JSON)").get("iterations") or []
+    try:
+        return (float(its[-1]["alpha"]), float(its[-1]["lam"])) if its else None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{run / 'history.json'}: expected alpha and lam in its last iteration, found {exc}") from exc
+
+
 def resume_generation(generator: BlendshapeGenerator, previous_rig: Rig, previous_weights: np.ndarray,
-                      n_previous: int, iterations: int = RESUME_ITERATIONS, progress=None) -> GenerationResult:
+                      n_previous: int, iterations: int = RESUME_ITERATIONS, progress=None,
+                      final_step=None) -> GenerationResult:
     """Warm-started generation (module docstring) on ``generator``, whose first ``n_previous``
     training expressions are those of the finished run (rig ``previous_rig``, weights
     ``previous_weights`` (n_previous, k), in the generator's shape order)."""
@@ -86,7 +97,7 @@ def resume_generation(generator: BlendshapeGenerator, previous_rig: Rig, previou
                          f"{previous_rig.n_shapes} shapes on {previous_rig.n_vertices}")
     if int(iterations) < 1:
         raise InputError(f"--iterations: expected >= 1 alternations after the warm start, found {iterations}")
-    alpha, lam = opts.schedule()[-1]
+    alpha, lam = opts.schedule()[-1] if final_step is None else final_step
     n_new = len(p.examples) - n_previous
     used = dataclasses.replace(opts, iterations=int(iterations), alpha=(alpha, alpha), lam=(lam, lam))
     if n_new == 0:
@@ -151,7 +162,8 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     W = load_weights(run / "weights.json", names[:n_prev], tpl.names)
     problem = GenerationProblem(tpl, B0, T, X0, names, tuple(tuple(p) for p in inputs["exclusive"]), virtual_edges)
     gen = BlendshapeGenerator(problem, options)
-    result = resume_generation(gen, prev, W, n_prev, iterations or RESUME_ITERATIONS, progress)
+    result = resume_generation(gen, prev, W, n_prev, iterations or RESUME_ITERATIONS, progress,
+                               final_step=_final_step_from_history(run))
     sources = {"template": tpl_dir, "neutral": neutral, "exclude": exclude, "target": tgt}
     return ResumedRun(result, problem, result.options, tuple(map(str, ex_dirs + more_dirs)),
                       tuple(map(str, w_files + more_files)), sources, n_prev, len(names) - n_prev,

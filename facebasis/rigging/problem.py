@@ -266,5 +266,19 @@ class GenerationResult:
     contact: object | None = None
 
     @property
+    def final_step(self) -> tuple[float, float]:
+        """(alpha, lambda) of the last alternation run: the lambda the stored weights were solved at
+        (with ``alpha="auto"`` the run follows the cross-validated path, which need not end where
+        ``options.schedule()`` does). Without alternations (a resume with no new examples), the end
+        of the options' schedule."""
+        if self.history:
+            return float(self.history[-1].alpha), float(self.history[-1].lam)
+        if self.options is None:
+            raise InputError("generation result: expected its options or an alternation to read the final "
+                             "(alpha, lambda) from, found neither")
+        a, lam = self.options.schedule()[-1]
+        return float(a), float(lam)
+
+    @property
     def all_ipopt_succeeded(self) -> bool:
         return all(h.ipopt_success for h in self.history)

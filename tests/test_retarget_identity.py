@@ -133,3 +133,20 @@ def test_cli_identity_option(person, tmp_path, capsys):
     assert not (tmp_path / "bad").exists()
     with pytest.raises(InputError, match="--identity and --first-frame-neutral"):
         run_retarget(folder, tmp_path / "bad", identity="rig", first_frame_neutral=True)
+
+
+def test_span_basis_adds_no_direction_outside_a_rank_deficient_span():
+    """The residual part of the calibration is projected off the shapes' landmark motion; with shapes
+    the landmarks cannot tell apart that motion is rank-deficient, and the projection must remove
+    only its span (QR would remove arbitrary extra directions)."""
+    from facebasis.retarget.calibrate import span_basis
+
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(10, 2)) @ rng.normal(size=(2, 4))           # rank 2, four columns
+    Q = span_basis(M)
+    assert Q.shape == (10, 2)
+    np.testing.assert_allclose(Q.T @ Q, np.eye(2), atol=1e-12)
+    o = rng.normal(size=10)
+    coef, *_ = np.linalg.lstsq(M, o, rcond=None)
+    np.testing.assert_allclose(o - Q @ (Q.T @ o), o - M @ coef, atol=1e-10)   # the exact off-span part
+    assert span_basis(np.zeros((5, 3))).shape == (5, 0)

@@ -156,6 +156,8 @@ class FaceTracker:
         if not len(self._inner):
             return lm
         a = similarity_factor(self._outer0, lm[48:60])
+        if not np.isfinite(a) or abs(a) < 1e-9:   # a collapsed outer lip (lost tracking): keep frame 0's size
+            a = 1.0 + 0.0j
         if detections is not None:
             det = np.asarray(detections, float)
             d = det[self._inner] - det[self._partner]

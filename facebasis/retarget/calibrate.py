@@ -48,6 +48,8 @@ from .pose import PI
 
 #: pilot frames (evenly spaced) of the calibration
 CALIBRATION_FRAMES = 40
+#: singular values of the shapes' landmark motion below this fraction of the largest are not in its span
+SPAN_RTOL = 1e-10
 #: pilot rounds (the first cold, the others warm-started from the previous round)
 CALIBRATION_ROUNDS = 3
 #: quantile of a shape's pilot weights taken as its static baseline (part of the person's face)
@@ -59,6 +61,14 @@ MIN_GAIN = 0.1
 #: pilot frames whose rms residual exceeds this multiple of the median are left out of the estimate
 #: (frames where tracking failed; measured on a clip whose tracking collapses after ~40 s)
 OUTLIER = 2.0
+
+
+def span_basis(M: np.ndarray, rtol: float = SPAN_RTOL) -> np.ndarray:
+    """Orthonormal basis (n, r) of the column span of ``M`` (n, k), r its numerical rank (singular
+    values above ``rtol`` times the largest). Unlike a QR factorisation, it adds no directions
+    outside the span when ``M`` is rank-deficient (landmarks that cannot tell shapes apart)."""
+    U, sv, _ = np.linalg.svd(np.asarray(M, np.float64), full_matrices=False)
+    return U[:, sv > rtol * sv[0]] if sv.size and sv[0] > 0 else U[:, :0]
 
 
 @dataclass(frozen=True)
@@ -132,7 +142,9 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
         return IdentityCalibration(np.zeros((L, 3)), baseline, frames, float("nan"), float("nan"))  # not applied
     # in-plane landmark motion of the shapes: the residual part is kept orthogonal to it, so it can
     # neither absorb an expression nor undo the weights' lower bound (a negative shape direction)
-    Q, _ = np.linalg.qr(solver.D[:, :2].reshape(2 * L, k))
+    # (an orthonormal basis of their span from the SVD: the motion is rank-deficient when landmarks
+    # cannot tell shapes apart, and QR would add arbitrary directions outside the span)
+    Q = span_basis(solver.D[:, :2].reshape(2 * L, k))
     keep = solver.smooth, solver.ridge
     solver.smooth, solver.ridge = 0.0, RIDGE_FLOOR
     states = [None] * F

@@ -196,6 +196,8 @@ def test_cold_candidates_do_not_depend_on_the_others():
     chosen = min(("path", "cold"), key=lambda mo: min(both.curves[mo]))
     assert both.candidates == chosen and both.errors == pytest.approx(both.curves[chosen], rel=1e-15)
     assert both.best_alpha == (0.01, 0.1, 10.0)[int(np.argmin(both.curves[chosen]))]
+    assert (full.rigs_generated, path.rigs_generated, both.rigs_generated) == (2 * 3, 2 * 3, 2 * 5)
+    assert "both procedures tried" in both.to_json()["method"] and "warm-started path" in path.to_json()["method"]
     with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, both, found 'warm'"):
         GenerationOptions(cv_candidates="warm")
 

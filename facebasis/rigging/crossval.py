@@ -87,7 +87,10 @@ class CrossValidation:
 
     @property
     def rigs_generated(self) -> int:
-        return len(self.fold_errors) * len(self.grid)
+        """Rigs built by the cross-validation: one per fold and candidate, and with ``"both"`` the
+        cold candidates too (the largest candidate's rig is shared by both procedures)."""
+        per_fold = 2 * len(self.grid) - 1 if len(self.curves) > 1 else len(self.grid)
+        return len(self.fold_errors) * per_fold
 
     def final_schedule(self, options) -> list[tuple[float, float]]:
         """The (alpha, lambda) of every alternation of the final run on all training expressions:
@@ -109,8 +112,16 @@ class CrossValidation:
         return out
 
     def to_json(self) -> dict:
-        return {"method": "k-fold cross-validation of the final alpha (schedule 5a -> a), held-out error with "
-                          "refitted weights (bounds + complementarity, no prior)",
+        how = {"cold": "each candidate a from the rough weights with the schedule 5a -> a",
+               "path": "candidates along one warm-started path from the largest (schedule 5a -> a), then "
+                       f"{self.chain_iterations} alternations at each next smaller alpha; the final run follows "
+                       "that path down to the chosen alpha",
+               }
+        what = how.get(self.candidates, self.candidates)
+        if len(self.curves) > 1:
+            what = f"both procedures tried, the curve with the lower minimum kept: {what}"
+        return {"method": f"k-fold cross-validation of the final alpha ({what}), "
+                          "held-out error with refitted weights (bounds + complementarity, no prior)",
                 "grid": list(self.grid), "errors": list(self.errors),
                 "fold_errors": [list(r) for r in self.fold_errors], "best_alpha": self.best_alpha,
                 "schedule": list(self.schedule), "folds": list(self.folds),

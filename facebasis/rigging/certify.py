@@ -42,12 +42,13 @@ import numpy as np
 from ..errors import InputError, SolverError
 from .boxqp import DAQP_OK, BoxQPSolution, box_qp_kkt, solve_box_qp  # noqa: F401 (re-exported)
 from .weightproblem import (  # noqa: F401 (re-exported)
+    ExampleResiduals,
     WeightInstance, WeightProblem, WeightSolution, bound_violation, complementarity_violation,
 )
 
 
 @dataclass(frozen=True, eq=False)
-class CertifiedSolution:
+class CertifiedSolution(ExampleResiduals):
     """A certified global optimum of one example's weight problem.
 
     Attributes
@@ -81,15 +82,6 @@ class CertifiedSolution:
     def certified(self) -> bool:
         return self.gap <= self.gap_tol * (1.0 + abs(self.objective))
 
-    @property
-    def max_complementarity(self) -> float:
-        """``max |x_a x_b|`` over the problem's pairs at x (0.0 exactly when certified)."""
-        return float(self.problem.complementarity(self.x)[0])
-
-    @property
-    def max_bound_violation(self) -> float:
-        """Largest violation of ``0 <= x <= 1`` at x (0.0 exactly when certified)."""
-        return float(self.problem.bounds(self.x)[0])
 
 
 def _as_problem(G, c, const, pairs, prior, lam) -> WeightProblem:

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .weightproblem import WeightProblem, check_pairs
+from .weightproblem import ExampleResiduals, WeightProblem, check_pairs
 from .weights import IPOPT_OK
 
 FORMULATIONS = ("equality", "inequality", "scholtes", "penalty")
@@ -47,7 +47,7 @@ PENALTY_RHO = tuple(10.0 ** e for e in range(0, 9))
 
 
 @dataclass(frozen=True, eq=False)
-class FormulationResult:
+class FormulationResult(ExampleResiduals):
     """One IPOPT formulation on one example's problem: raw answer x (k,), IPOPT statuses of every
     solve, total IPOPT iterations and wall time; the eq. 5 objective and the violations at x come
     from ``problem`` (one example)."""
@@ -67,13 +67,6 @@ class FormulationResult:
     def objective(self) -> float:
         return float(self.problem.objective(self.x)[0])
 
-    @property
-    def max_complementarity(self) -> float:
-        return float(self.problem.complementarity(self.x)[0])
-
-    @property
-    def max_bound_violation(self) -> float:
-        return float(self.problem.bounds(self.x)[0])
 
 
 class FormulationSolver:

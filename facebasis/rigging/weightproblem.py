@@ -121,6 +121,21 @@ def _as_float(a, name):
     return a
 
 
+class ExampleResiduals:
+    """Mixin of a one-example answer ``x`` (k,) of ``problem`` (a one-example :class:`WeightProblem`):
+    its residuals are computed from the problem, never stored."""
+
+    @property
+    def max_complementarity(self) -> float:
+        """``max |x_a x_b|`` over the problem's exclusive pairs at x."""
+        return float(self.problem.complementarity(self.x)[0])
+
+    @property
+    def max_bound_violation(self) -> float:
+        """Largest violation of ``0 <= x <= 1`` at x."""
+        return float(self.problem.bounds(self.x)[0])
+
+
 @dataclass(frozen=True, eq=False)
 class WeightProblem:
     """Eq. 5 for m examples that share the blendshapes (module docstring).

@@ -39,6 +39,8 @@ CASES = [
     ("rig {rig} --exclusive jawOpen:jawShut", "unknown blendshape names ['jawShut']"),
     ("rig {rig} --exclusive jawOpen:jawOpen", "expected two different shapes, found one twice"),
     ("rig {rig} --alpha auto --cv-candidates warm", "--cv-candidates: invalid choice: 'warm'"),
+    ("rig {rig} --cv-grid 0.1", "--cv-grid: expected --alpha auto as well (cross-validation chooses alpha only then), found --alpha 0.5,0.1"),
+    ("rig {rig} --alpha 1,0.2 --cv-folds 3 --cv-candidates cold", "--cv-folds, --cv-candidates: expected --alpha auto as well"),
     ("rig {rig} --contact-allow-target-pairs", "--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none"),
     ("rig {rig} --contact --contact-exclude noSuchShape", "noSuchShape"),
     ("transfer --template {d}/template --target {d}/target.obj --contact-allow-target-pairs --out {o}", "expected --contact as well"),

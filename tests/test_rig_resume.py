@@ -59,6 +59,8 @@ def test_resume_with_more_examples_warm_starts_and_verifies(finished, capsys):
 @pytest.mark.parametrize("extra,message", [
     (["--alpha", "0.3,0.1"], r"--resume: expected the run's own schedule and pairs, found --alpha"),
     (["--exclusive", "jawLeft:jawRight"], r"--resume: expected the run's own schedule and pairs, found --exclusive"),
+    (["--cv-folds", "3", "--cv-candidates", "cold"],
+     r"--resume: expected the run's own schedule and pairs, found --cv-folds, --cv-candidates"),
     (["--examples", "MORE"], r"--resume: expected --examples and --weights together \(or neither\), found only --examples"),
 ])
 def test_resume_errors_before_solving(finished, capsys, extra, message):

@@ -71,12 +71,17 @@ def _cv_grid(values) -> tuple[float, ...]:
 
 
 def _rig_options(args):
+    from ..errors import InputError
     from ..rigging.generation import GenerationOptions
 
+    grid = _cv_grid(args.cv_grid)
+    if args.cv_given and str(args.alpha).strip().lower() != "auto":
+        raise InputError(f"{', '.join(args.cv_given)}: expected --alpha auto as well (cross-validation chooses "
+                         f"alpha only then), found --alpha {args.alpha}")
     return GenerationOptions(iterations=args.iterations, alpha=_alpha_option(args.alpha),
                              lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
                              virtual_mode=args.virtual_mode, ipopt=args.ipopt, unobserved=args.unobserved,
-                             support=args.support, cv_folds=args.cv_folds, cv_grid=_cv_grid(args.cv_grid),
+                             support=args.support, cv_folds=args.cv_folds, cv_grid=grid,
                              cv_candidates=args.cv_candidates)
 
 
@@ -198,9 +203,9 @@ def _cmd_rig_resume(args) -> int:
     from ..rigging.enrich import resume_run
     from ..rigging.runs import write_rig_run
 
-    if args.alpha_given or args.lam_given or args.exclusive:
+    if args.alpha_given or args.lam_given or args.exclusive or args.cv_given:
         given = [f for f, v in (("--alpha", args.alpha_given), ("--lambda", args.lam_given),
-                                ("--exclusive", bool(args.exclusive))) if v]
+                                ("--exclusive", bool(args.exclusive))) if v] + args.cv_given
         raise InputError(f"--resume: expected the run's own schedule and pairs, found {', '.join(given)} "
                          "(start a new run to change them)")
     ve = None
@@ -269,6 +274,11 @@ def _cmd_rig_defaults(func, defaults):
     def run(args):
         args.alpha_given, args.lam_given = args.alpha is not None, args.lam is not None
         args.iterations_given = args.iterations
+        # the cross-validation flags only mean something with --alpha auto on a fresh run
+        args.cv_given = [flag for flag, v in (("--cv-folds", args.cv_folds), ("--cv-grid", args.cv_grid or None),
+                                              ("--cv-candidates", args.cv_candidates)) if v is not None]
+        args.cv_folds = defaults.cv_folds if args.cv_folds is None else args.cv_folds
+        args.cv_candidates = defaults.cv_candidates if args.cv_candidates is None else args.cv_candidates
         args.alpha = alpha if args.alpha is None else args.alpha
         args.lam = lam if args.lam is None else args.lam
         args.iterations = defaults.iterations if args.iterations is None else args.iterations
@@ -341,12 +351,12 @@ def register(sub) -> None:
                         f"transfer (weights held at 0) or fit them like the others (default {defaults.unobserved})")
     p.add_argument("--support", type=float, default=defaults.support,
                    help=f"rough weight a shape needs in some example to count as observed (default {defaults.support:g})")
-    p.add_argument("--cv-folds", type=int, default=defaults.cv_folds,
+    p.add_argument("--cv-folds", type=int, default=None,
                    help=f"folds of --alpha auto (default {defaults.cv_folds})")
     p.add_argument("--cv-grid", action="extend", nargs="+", default=[], metavar="ALPHA",
                    help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
                         f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
-    p.add_argument("--cv-candidates", choices=("path", "cold", "both"), default=defaults.cv_candidates,
+    p.add_argument("--cv-candidates", choices=("path", "cold", "both"), default=None,
                    help="--alpha auto: each fold's candidates along one warm-started path and the final run along "
                         "the same path down to the chosen alpha (path), every candidate from the rough weights with "
                         "its own schedule (cold, about 3.5x the cost), or both curves and the lower one (both; "

@@ -259,3 +259,20 @@ def test_ict_generation_beats_transfer_on_heldout():
         errs[name] = reproduction_error(rig, pp.heldout, p.pair_indices)
     print(errs)
     assert errs["generated"] < 0.5 * errs["transfer"]
+
+
+def test_final_step_is_the_last_alternation_run():
+    """``GenerationResult.final_step``: the last alternation's (alpha, lambda), else the end of the
+    options' schedule, else a clear error."""
+    import dataclasses
+
+    from facebasis.rigging.generation import generate_blendshapes
+    from facebasis.rigging.synthetic import default_face_problem
+
+    pp = default_face_problem(seed=0, n_train=4)
+    res = generate_blendshapes(pp.problem, GenerationOptions(iterations=2, ipopt="never"))
+    assert res.final_step == (res.history[-1].alpha, res.history[-1].lam)
+    bare = dataclasses.replace(res, history=())
+    assert bare.final_step == tuple(GenerationOptions(iterations=2).schedule()[-1])
+    with pytest.raises(InputError, match="expected its options or an alternation"):
+        dataclasses.replace(bare, options=None).final_step

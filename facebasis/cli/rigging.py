@@ -131,13 +131,11 @@ def cmd_rig(args) -> int:
     options = _rig_options(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
-    if args.contact_exclude:
-        template.index(args.contact_exclude, what="--contact-exclude")
     if args.contact:
-        from ..contact.exact import check_size, check_target_neutral
+        from ..contact.exact import check_contact_inputs
 
-        check_size(template.n_vertices, what="--contact")
-        check_target_neutral(target, template, args.contact_allow_target_pairs, what=f"--contact: {args.target}")
+        check_contact_inputs(template, target, args.contact_exclude, args.contact_allow_target_pairs,
+                             what="--contact", exclude_what="--contact-exclude", target_what=str(args.target))
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
     ve = virtual_edges_for(args, template)

@@ -80,6 +80,20 @@ def check_target_neutral(target, template: Rig, allow: bool = False, what: str =
     return bad
 
 
+def check_contact_inputs(template: Rig, target_neutral, exclude=(), allow_target_pairs: bool = False, *,
+                         what: str = "contact", exclude_what: str | None = None,
+                         target_what: str = "target neutral") -> None:
+    """What exact contact needs, checked before any solving (``rig --contact`` and
+    ``generate_blendshapes(contact=True)``): known shape names in ``exclude``, a mesh within the time
+    budget (:func:`check_size`), and a target neutral (n, 3) that does not intersect itself beyond
+    the template neutral unless ``allow_target_pairs`` (:func:`check_target_neutral`). Messages name
+    ``exclude_what`` (default ``<what>_exclude``), ``what`` and ``"<what>: <target_what>"``."""
+    if exclude:
+        template.index(list(exclude), what=exclude_what or f"{what}_exclude")
+    check_size(template.n_vertices, what=what)
+    check_target_neutral(target_neutral, template, allow_target_pairs, what=f"{what}: {target_what}")
+
+
 def _check_exclude(exclude, names, what: str) -> list:
     exclude = [exclude] if isinstance(exclude, str) else list(exclude)
     unknown = [e for e in exclude if e not in names]

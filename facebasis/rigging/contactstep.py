@@ -6,8 +6,8 @@ guarantee: no triangle pair intersects in a generated shape unless it intersects
 neutral or in the template shape; checked by the package's exact counter after every solve). The
 stored weights must then be the certified optimum of eq. 5 (Gao et al. 2015) for the shapes
 actually written, so the final weight step is solved once more at the run's final lambda and the
-training residuals are recomputed. This module is the stated interface through which rigging uses
-contact.
+training residuals are recomputed. The contact inputs are checked before generation by
+:func:`facebasis.contact.exact.check_contact_inputs`.
 """
 
 from __future__ import annotations
@@ -20,19 +20,6 @@ from .certify import certify_problem
 from .generation import BlendshapeGenerator, relative_residuals
 from .problem import GenerationResult
 from .weightproblem import WeightProblem
-
-
-def check_contact_inputs(problem, exclude=(), allow_target_pairs: bool = False, what: str = "contact") -> None:
-    """What exact contact needs, checked before generation starts: known shape names in
-    ``exclude``, a mesh within the time budget, and a target neutral that does not intersect itself
-    beyond the template neutral (unless ``allow_target_pairs``). Raises InputError naming the
-    option (``what``) and the pairs."""
-    from ..contact.exact import check_size, check_target_neutral
-
-    if exclude:
-        problem.template.index(list(exclude), what=f"{what}_exclude")
-    check_size(problem.template.n_vertices, what=what)
-    check_target_neutral(problem.target_neutral, problem.template, allow_target_pairs, what=f"{what}: target neutral")
 
 
 def contact_generation(generator: BlendshapeGenerator, result: GenerationResult, exclude=(),
@@ -71,4 +58,4 @@ def contact_generation(generator: BlendshapeGenerator, result: GenerationResult,
                                         missing=missing)
 
 
-__all__ = ["check_contact_inputs", "contact_generation"]
+__all__ = ["contact_generation"]

@@ -55,32 +55,30 @@ class ResumedRun:
     seconds: float
 
 
-def _options_from_history(run: Path) -> GenerationOptions:
+def _read_history(run: Path):
+    """The finished run's options and the (alpha, lambda) of its last alternation (None when it
+    recorded none: then the end of its options' schedule is used), from one read of history.json."""
     path = run / "history.json"
     if not path.is_file():
         raise InputError(f"--resume {run}: expected history.json (written by `facebasis rig`), found no such file")
+    history = read_json(path, "the run's history (JSON)")
     try:
-        opts = read_json(path, "the run's history (JSON)")["options"]
-    except (KeyError, TypeError) as exc:
+        opts = history["options"]
+        known = {f.name for f in dataclasses.fields(GenerationOptions)}
+        kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in opts.items() if k in known}
+    except (KeyError, TypeError, AttributeError) as exc:
         raise InputError(f"{path}: expected the run's options under 'options', found an unreadable file ({exc})") from exc
-    known = {f.name for f in dataclasses.fields(GenerationOptions)}
-    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in opts.items() if k in known}
-    return GenerationOptions(**kw)
+    its = history.get("iterations") or []
+    try:
+        final_step = (float(its[-1]["alpha"]), float(its[-1]["lam"])) if its else None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: expected alpha and lam in its last iteration, found {exc}") from exc
+    return GenerationOptions(**kw), final_step
 
 
 def rig_as_rows(rig: Rig) -> np.ndarray:
     """A rig's deltas in the reconstruction layout (n, 3k) of the generator (column ``d k + i``)."""
     return np.ascontiguousarray(rig.deltas.transpose(1, 2, 0)).reshape(rig.n_vertices, -1)
-
-
-def _final_step_from_history(run: Path):
-    """(alpha, lambda) of the finished run's last alternation (history.json), or None when it
-    recorded none (then the end of its options' schedule is used)."""
-    its = read_json(run / "history.json", "the run's history (JSON)").get("iterations") or []
-    try:
-        return (float(its[-1]["alpha"]), float(its[-1]["lam"])) if its else None
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{run / 'history.json'}: expected alpha and lam in its last iteration, found {exc}") from exc
 
 
 def resume_generation(generator: BlendshapeGenerator, previous_rig: Rig, previous_weights: np.ndarray,
@@ -129,7 +127,7 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     if not run.is_dir():
         raise InputError(f"--resume: expected a finished `facebasis rig` output folder, found no folder {run}")
     inputs, ex_dirs, w_files = read_inputs(run)
-    options = _options_from_history(run)
+    options, final_step = _read_history(run)
     if threads is not None:
         options = dataclasses.replace(options, threads=threads)
     src = dict(inputs.get("sources") or {})
@@ -163,7 +161,7 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     problem = GenerationProblem(tpl, B0, T, X0, names, tuple(tuple(p) for p in inputs["exclusive"]), virtual_edges)
     gen = BlendshapeGenerator(problem, options)
     result = resume_generation(gen, prev, W, n_prev, iterations or RESUME_ITERATIONS, progress,
-                               final_step=_final_step_from_history(run))
+                               final_step=final_step)
     sources = {"template": tpl_dir, "neutral": neutral, "exclude": exclude, "target": tgt}
     return ResumedRun(result, problem, result.options, tuple(map(str, ex_dirs + more_dirs)),
                       tuple(map(str, w_files + more_files)), sources, n_prev, len(names) - n_prev,

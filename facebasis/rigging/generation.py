@@ -330,9 +330,10 @@ def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions 
     is ``result.contact`` (check ``result.contact.ok``).
     """
     if contact:  # the contact inputs are checked before any solving starts
-        from .contactstep import check_contact_inputs, contact_generation
+        from ..contact.exact import check_contact_inputs
+        from .contactstep import contact_generation
 
-        check_contact_inputs(problem, contact_exclude, allow_target_pairs)
+        check_contact_inputs(problem.template, problem.target_neutral, contact_exclude, allow_target_pairs)
     elif contact_exclude or allow_target_pairs:
         raise InputError("contact_exclude / allow_target_pairs: expected contact=True as well, found contact=False")
     gen = BlendshapeGenerator(problem, options)

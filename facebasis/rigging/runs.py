@@ -52,8 +52,7 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
         "threshold": options.missing_threshold,
         "relative_residual": dict(zip(names, map(float, result.residuals))),
         "missing": list(result.missing)})
-    final_lambda = result.final_step[1] if (result.history or result.options is not None) else options.schedule()[-1][1]
-    write_inputs(folder, examples_dir, weights_file, problem.exclusive, final_lambda, relative_to,
+    write_inputs(folder, examples_dir, weights_file, problem.exclusive, result.final_step[1], relative_to,
                  unobserved=getattr(result, "unobserved", ()), sources=sources)
     cv = getattr(result, "crossval", None)
     if cv is not None:

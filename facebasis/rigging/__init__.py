@@ -9,6 +9,7 @@ Modules
 -------
 problem        the generation problem, its options and its result
 basis          the basis step (eq. 2-4), vectorised over triangles, and its array layouts
+spdsolve       many small Cholesky solves (LAPACK ``dposv``) with the GIL released, for the basis step
 generation     precompute once, alternate the steps (``BlendshapeGenerator``, ``generate_blendshapes``)
 weightproblem  the eq. 5 weight problem (``WeightProblem``: data, objective, residuals, pair checks)
                and its solutions (``WeightSolution``)

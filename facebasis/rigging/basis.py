@@ -36,6 +36,7 @@ import numpy as np
 
 
 from ..errors import SolverError
+from .spdsolve import posv_rows
 
 
 
@@ -74,12 +75,6 @@ WOODBURY_RATIO = 0.6
 def use_direct(k: int, m: int) -> bool:
     """Whether the basis step solves the k x k systems directly (else the m x m Woodbury form)."""
     return m >= WOODBURY_RATIO * k
-
-
-def _lapack_posv():
-    from scipy.linalg import lapack
-
-    return lapack.dposv
 
 
 #: triangles whose k x k systems are formed at a time inside a block of the direct path (one
@@ -121,8 +116,9 @@ def _basis_block(X, XX, RT, AT, w, alpha, out, s):
     are one contiguous (6c, m) matrix, its right-hand sides ``X R + D A~`` come out of one product
     as (c, 6, k), which is per triangle the Fortran-ordered (k, 6) LAPACK solves in place;
     ``out`` is (2, m_tri, 3, k) = [column e, triangle, coordinate d, shape i]. ``XX`` is ``X X^T``
-    (k, k) when :func:`use_direct` (k x k Cholesky solves, one LAPACK ``posv`` per triangle, the
-    matrices formed :data:`SUB_BLOCK` at a time in one reused buffer), else the (k, m*m) table of
+    (k, k) when :func:`use_direct` (k x k Cholesky solves, one LAPACK ``posv`` per triangle without
+    the GIL (:func:`~facebasis.rigging.spdsolve.posv_rows`), the matrices formed :data:`SUB_BLOCK`
+    at a time in one reused buffer), else the (k, m*m) table of
     ``x_i x_i^T`` for the Woodbury form.
     """
     k, m = X.shape
@@ -135,17 +131,16 @@ def _basis_block(X, XX, RT, AT, w, alpha, out, s):
         D = alpha * wt
         Y = D[:, None, :] * As
         Y += XR                                          # right-hand sides, solved in place: (c, 6, k)
-        posv = _lapack_posv()
         buf = np.empty((min(SUB_BLOCK, c), k, k))
         for j0 in range(0, c, SUB_BLOCK):
             n = min(SUB_BLOCK, c - j0)
             A = buf[:n]
             A[...] = XX
             A.reshape(n, -1)[:, :: k + 1] += D[j0:j0 + n]
-            for t in range(n):  # one LAPACK call per triangle, in place, without the GIL
-                _, _, info = posv(A[t].T, Y[j0 + t].T, lower=1, overwrite_a=1, overwrite_b=1)
-                if info != 0:  # pragma: no cover - X X^T + D is positive definite for alpha, w > 0
-                    raise SolverError(f"basis step: Cholesky failed on a triangle (LAPACK info {info})", str(info))
+            try:  # one LAPACK Cholesky solve per triangle, in place, without the GIL (spdsolve)
+                posv_rows(A, Y[j0:j0 + n])
+            except SolverError as err:  # pragma: no cover - X X^T + D is positive definite for alpha, w > 0
+                raise SolverError(f"basis step: {err}", err.status) from None
     else:
         dinv = 1.0 / (alpha * wt)                        # D^-1, (c, k)
         Gm = XR * dinv[:, None, :]

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m problems.bench {transfer,rig,rig-scale,weights,virtual,cli,all} [--repeat N] [--m M ...]``.
+"""Benchmarks: ``python -m problems.bench {transfer,rig,rig-scale,basis,weights,virtual,cli,all} [--repeat N] [--m M ...]``.
 
 Prints wall times (file I/O excluded; median of ``--repeat`` warm runs and the first, cold run)
 and peak traced memory (numpy allocations, via tracemalloc, in a separate run so tracing does not
@@ -288,13 +288,63 @@ def bench_rig_scale(repeat: int, ms=(20, 40, 80, 160)) -> dict:
     return out
 
 
+def bench_basis(repeat: int, ms=(80,)) -> dict:
+    """One basis step (eq. 2-4, every triangle of ICT) per number of training expressions: LAPACK
+    dposv through SciPy's C pointer without the GIL (the default) against SciPy's wrapper, on one
+    thread and on the machine's cores; wall and CPU seconds, best of ``repeat``."""
+    from concurrent.futures import ThreadPoolExecutor
+    from unittest import mock
+
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    from facebasis.rigging import spdsolve
+    from facebasis.rigging.basis import basis_rows, use_direct
+    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions, _available_cores
+    from problems.generation import ict_person_problem
+
+    cores = _available_cores()
+    print(f"basis: one basis step on ICT (28,068 triangles, k = 53), {cores} cores; load average in brackets")
+    out = {}
+    for m in ms:
+        pp = ict_person_problem(seed=0, n_train=m)
+        gen = BlendshapeGenerator(pp.problem, GenerationOptions())
+        X = np.ascontiguousarray(pp.problem.initial_weights.T)
+        k = X.shape[0]
+        results = {}
+        for kernel in (True, False):
+            for threads in (1, cores):
+                pool = ThreadPoolExecutor(threads) if threads > 1 else None
+                walls, cpus = [], []
+                with mock.patch.object(spdsolve, "_KERNEL", [spdsolve.kernel() if kernel else None]), \
+                        threadpool_limits(1):
+                    for _ in range(max(1, repeat)):
+                        t0, c0 = time.perf_counter(), time.process_time()
+                        rows, _, _ = basis_rows(X, gen.R, gen.A_tilde, gen.w, 0.5, executor=pool)
+                        walls.append(time.perf_counter() - t0)
+                        cpus.append(time.process_time() - c0)
+                if pool is not None:
+                    pool.shutdown()
+                results[(kernel, threads)] = rows
+                label = f"{'dposv pointer, no GIL' if kernel else 'scipy wrapper (GIL)':22s} {threads} thread(s)"
+                i = int(np.argmin(walls))
+                print(f"  m {m:3d} ({'direct' if use_direct(k, m) else 'Woodbury'}) {label}: {walls[i]:.3f} s wall, "
+                      f"{cpus[i]:.3f} s CPU  [{os.getloadavg()[0]:.1f}]", flush=True)
+                out[(m, kernel, threads)] = walls[i]
+        ref = results[(False, 1)]
+        same = all(np.array_equal(r, ref) for r in results.values())
+        print(f"  m {m:3d}: all four give bit-identical blendshape frames: {same}")
+    return out
+
+
 def bench_cli(repeat: int, facex: str | None = None) -> dict:
     from problems.bench_cli import bench_cli as run
 
     return run(repeat, facex)
 
 
-BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "rig-scale": bench_rig_scale, "weights": bench_weights,
+BENCHES = {"transfer": bench_transfer, "rig": bench_rig, "rig-scale": bench_rig_scale, "basis": bench_basis,
+           "weights": bench_weights,
            "virtual": bench_virtual,
            "cli": bench_cli}
 
@@ -304,7 +354,7 @@ def main(argv=None) -> int:
     parser.add_argument("which", nargs="?", default="all", choices=sorted(BENCHES) + ["all"])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--m", type=int, nargs="+", default=[20, 40, 80, 160], metavar="M",
-                        help="rig-scale: the numbers of training expressions to time")
+                        help="rig-scale, basis: the numbers of training expressions to time")
     parser.add_argument("--facex", default=None, metavar="DIR",
                         help="cli: also time ICT-FaceKit's raw FaceXModel folder (as it ships) onto identity003")
     args = parser.parse_args(argv)
@@ -319,6 +369,8 @@ def main(argv=None) -> int:
             bench_cli(args.repeat, args.facex)
         elif name == "rig-scale":
             bench_rig_scale(args.repeat, tuple(args.m))
+        elif name == "basis":
+            bench_basis(args.repeat, tuple(args.m))
         else:
             BENCHES[name](args.repeat)
     return 0

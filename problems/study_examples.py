@@ -1,7 +1,7 @@
 """Study: held-out error against the number of training expressions (ICT person problems).
 
 ``python -m problems.study_examples [--m 10 20 40 80 160] [--seeds 0 1 2] [--out reports/examples_study]
-[--grid A ...] [--redo] [--methods METHOD ...] [--candidates path|cold]``
+[--grid A ...] [--redo] [--methods METHOD ...] [--candidates path|cold] [--heldout N]``
 
 For every (m, seed): template deltas, deformation transfer, example-based generation with the
 paper's schedule (unobserved shapes fitted, the paper; and kept at their transfer, the default),
@@ -32,13 +32,14 @@ METHODS = ("template deltas", "deformation transfer", "paper (unobserved fitted)
            "alpha auto", "oracle (true weights)")
 
 
-def run_case(m: int, seed: int, grid: tuple[float, ...] = (), methods=METHODS, candidates: str = "path") -> list[dict]:
+def run_case(m: int, seed: int, grid: tuple[float, ...] = (), methods=METHODS, candidates: str = "path",
+             n_heldout: int = 20) -> list[dict]:
     from facebasis.geometry.transfer import deformation_transfer
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
     from problems.generation import ict_person_problem
 
-    pp = ict_person_problem(seed=seed, n_train=m)
+    pp = ict_person_problem(seed=seed, n_train=m, n_heldout=n_heldout)
     p = pp.problem
     unseen = np.flatnonzero(pp.true_weights.max(axis=0) == 0)
     rows = []
@@ -46,7 +47,8 @@ def run_case(m: int, seed: int, grid: tuple[float, ...] = (), methods=METHODS, c
     def score(name, rig, seconds, cpu, weights=None, extra=None):
         err = heldout_error(rig, pp.heldout, p.pair_indices)
         d = np.linalg.norm(rig.deltas - pp.truth.deltas, axis=(1, 2)) / np.linalg.norm(pp.truth.deltas, axis=(1, 2))
-        row = {"m": m, "seed": seed, "method": name, "heldout": err, "seconds": seconds, "cpu_seconds": cpu,
+        row = {"m": m, "seed": seed, "method": name, "heldout": err, "n_heldout": n_heldout, "seconds": seconds,
+               "cpu_seconds": cpu,
                "n_unseen": int(len(unseen)), "unseen_shape_error": float(d[unseen].mean()) if len(unseen) else None,
                "seen_shape_error": float(np.delete(d, unseen).mean()),
                "unseen_weight_error": (float(np.abs(weights[:, unseen]).mean()) if weights is not None and len(unseen)
@@ -128,8 +130,10 @@ def summarise(rows, out: Path) -> None:
     table = {}
     for r in rows:
         table.setdefault((r["method"], r["m"]), []).append(r)
+    counts = sorted({r.get("n_heldout", 20) for r in rows})
     lines = ["# Held-out error against the number of training expressions (ICT person problems)", "",
-             "Relative held-out error `||B0 + Bx - T|| / ||T - B0||` over 20 held-out expressions per seed, weights "
+             "Relative held-out error `||B0 + Bx - T|| / ||T - B0||` over "
+             f"{' / '.join(map(str, counts))} held-out expressions per seed, weights "
              "refitted (bounds + complementarity, no prior); mean over the seeds run (n in brackets). Made by "
              "`python -m problems.study_examples`.", "",
              "| method | " + " | ".join(f"m = {m}" for m in ms) + " |", "|---|" + "---|" * len(ms)]
@@ -213,7 +217,11 @@ def main(argv=None) -> int:
                     help="only these methods (their rows replaced; the others of the case kept)")
     ap.add_argument("--candidates", default="path", choices=("path", "cold"),
                     help="cross-validation candidates of alpha auto (GenerationOptions.cv_candidates)")
+    ap.add_argument("--heldout", type=int, default=20,
+                    help="held-out expressions scored per case (default 20; a folder's rows should share one count)")
     args = ap.parse_args(argv)
+    if args.heldout < 1:
+        ap.error(f"--heldout: expected a positive count, found {args.heldout}")
     from problems.ict import ict_available, ict_path
 
     if not ict_available():
@@ -227,7 +235,7 @@ def main(argv=None) -> int:
             done = {(r["m"], r["seed"]) for r in load_rows(out) if r["method"] == args.methods[-1]}
             if (m, seed) in done and not args.redo:
                 continue
-            merge_rows(out, run_case(m, seed, tuple(args.grid), tuple(args.methods), args.candidates))
+            merge_rows(out, run_case(m, seed, tuple(args.grid), tuple(args.methods), args.candidates, args.heldout))
     with _locked(out):
         summarise(load_rows(out), out)
     return 0

@@ -276,3 +276,27 @@ def test_final_step_is_the_last_alternation_run():
     assert bare.final_step == tuple(GenerationOptions(iterations=2).schedule()[-1])
     with pytest.raises(InputError, match="expected its options or an alternation"):
         dataclasses.replace(bare, options=None).final_step
+
+
+def test_casadi_model_built_on_a_side_thread_only_when_ipopt_runs_and_answers_unchanged():
+    """The CasADi model of eq. 5 is built while the alternations run when the schedule calls IPOPT,
+    not at all with ``ipopt="never"``, and the run equals one whose model was built beforehand."""
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.synthetic import default_face_problem
+
+    pp = default_face_problem(seed=0, n_train=4)
+    never = BlendshapeGenerator(pp.problem, GenerationOptions(iterations=2, ipopt="never"))
+    never.run()
+    assert never._weight_solver is None and never._weight_solver_future is None
+
+    side = BlendshapeGenerator(pp.problem, GenerationOptions(iterations=2, ipopt="final"))
+    res = side.run()
+    assert isinstance(side._weight_solver, WeightSolver) and side._weight_solver_future is None
+    assert res.history[0].ipopt_status == "not run" and res.history[-1].ipopt_status != "not run"
+
+    before = BlendshapeGenerator(pp.problem, GenerationOptions(iterations=2, ipopt="final"))
+    solver = before.weight_solver  # built synchronously, first
+    ref = before.run()
+    assert before._weight_solver is solver
+    np.testing.assert_array_equal(res.weights, ref.weights)
+    np.testing.assert_array_equal(res.rig.deltas, ref.rig.deltas)

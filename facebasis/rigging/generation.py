@@ -104,6 +104,7 @@ class BlendshapeGenerator:
         self.R, self.targets, self.target_sq = examples_part.result()
         self.pairs = problem.pair_indices
         self._weight_solver = None  # the CasADi model, built when first needed (ipopt option)
+        self._weight_solver_future = None  # ... or on a side thread while the alternations run
         # anchors keep the template's delta (zero at still vertices), as deformation transfer does;
         # rows (a, 3k) with columns (coordinate, shape)
         av = self.dt.anchor_values()  # (k, a, 3)
@@ -188,6 +189,7 @@ class BlendshapeGenerator:
         g.targets = [np.ascontiguousarray(T[:, idx]) for T in self.targets]
         g.target_sq = self.target_sq[idx]
         g._weight_solver = None
+        g._weight_solver_future = None
         g.free = g._free_shapes()
         return g
 
@@ -199,6 +201,7 @@ class BlendshapeGenerator:
         g = copy.copy(self)
         g.options = options
         g._weight_solver = None
+        g._weight_solver_future = None
         g.free = g._free_shapes()
         return g
 
@@ -206,9 +209,24 @@ class BlendshapeGenerator:
     def weight_solver(self) -> WeightSolver:
         """The CasADi/IPOPT model of eq. 5 (built once, on first use)."""
         if self._weight_solver is None:
-            self._weight_solver = WeightSolver(self.problem.template.n_shapes, len(self.problem.examples),
-                                               self.pairs, self.options.ipopt_options, polish=self.options.polish)
+            future, self._weight_solver_future = self._weight_solver_future, None
+            self._weight_solver = future.result() if future is not None else self._build_weight_solver()
         return self._weight_solver
+
+    def _build_weight_solver(self) -> WeightSolver:
+        return WeightSolver(self.problem.template.n_shapes, len(self.problem.examples), self.pairs,
+                            self.options.ipopt_options, polish=self.options.polish)
+
+    def _prebuild_weight_solver(self, schedule) -> None:
+        """Start building the CasADi model on a side thread when a run of ``schedule`` will call
+        IPOPT: CasADi releases the GIL while it builds (0.3 s on ICT), so the build overlaps the
+        first alternations instead of delaying the final one."""
+        if self._weight_solver is not None or self._weight_solver_future is not None:
+            return
+        if any(self._runs_ipopt(it, len(schedule)) for it in range(len(schedule))):
+            side = ThreadPoolExecutor(1)
+            self._weight_solver_future = side.submit(self._build_weight_solver)
+            side.shutdown(wait=False)
 
     def gram(self, Bv):
         """``G = B^T B`` (k, k) and ``c_j = B^T t_j`` as rows, (m, k), from the reconstruction ``Bv``
@@ -263,6 +281,7 @@ class BlendshapeGenerator:
         if self.free is not None:
             X[:, ~self.free] = 0.0  # unobserved shapes: the first basis step already leaves them at their transfer
         schedule = opts.schedule() if schedule is None else [(float(a), float(b)) for a, b in schedule]
+        self._prebuild_weight_solver(schedule)
         workers = opts.threads or _available_cores()
         pool = ThreadPoolExecutor(workers) if workers > 1 else None
         try:

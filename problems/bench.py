@@ -304,7 +304,8 @@ def bench_basis(repeat: int, ms=(80,)) -> dict:
     from problems.generation import ict_person_problem
 
     cores = _available_cores()
-    print(f"basis: one basis step on ICT (28,068 triangles, k = 53), {cores} cores; load average in brackets")
+    print(f"basis: one basis step on ICT (28,068 triangles, k = 53), {cores} cores; load average in brackets; "
+          f"GIL-free dposv pointer {'found' if spdsolve.kernel() is not None else 'NOT found (SciPy wrapper used)'}")
     out = {}
     for m in ms:
         pp = ict_person_problem(seed=0, n_train=m)

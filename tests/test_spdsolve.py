@@ -73,3 +73,15 @@ def test_bad_layouts_are_rejected_before_any_call():
     ro.flags.writeable = False
     with pytest.raises(InputError, match="B: expected a writeable"):
         posv_rows(A, ro)
+
+
+def test_only_the_expected_dposv_signature_is_called_through_ctypes():
+    sig = spdsolve._DPOSV_SIGNATURE
+    d = "__pyx_t_5scipy_6linalg_13cython_lapack_d"
+    assert sig.fullmatch(f"void (char *, int *, int *, {d} *, int *, {d} *, int *, int *)")
+    assert sig.fullmatch("void (char *, int *, int *, double *, int *, double *, int *, int *)")
+    # single precision, a missing argument, another return type: not the ABI the call assumes
+    assert not sig.fullmatch("void (char *, int *, int *, __pyx_t_5scipy_6linalg_13cython_lapack_s *, int *, "
+                             "__pyx_t_5scipy_6linalg_13cython_lapack_s *, int *, int *)")
+    assert not sig.fullmatch(f"void (char *, int *, int *, {d} *, int *, {d} *, int *)")
+    assert not sig.fullmatch(f"int (char *, int *, int *, {d} *, int *, {d} *, int *, int *)")

@@ -16,14 +16,16 @@ wrapper: same LAPACK routine, same answers, serial speed.
 from __future__ import annotations
 
 import ctypes
+import re
 
 import numpy as np
 
 from ..errors import InputError, SolverError
 
-#: the C signature scipy.linalg.cython_lapack declares for dposv (the ABI the ctypes call assumes)
-_DPOSV_SIGNATURE = "void (char *, int *, int *, __pyx_t_5scipy_6linalg_13cython_lapack_d *, int *, " \
-                   "__pyx_t_5scipy_6linalg_13cython_lapack_d *, int *, int *)"
+#: the C signature scipy.linalg.cython_lapack declares for dposv (the ABI the ctypes call assumes;
+#: its double type is Cython's mangled name for ``d``, e.g. ``__pyx_t_5scipy_6linalg_13cython_lapack_d``)
+_DPOSV_SIGNATURE = re.compile(r"void \(char \*, int \*, int \*, (?P<d>(\w+_d|double)) \*, int \*, "
+                              r"(?P=d) \*, int \*, int \*\)")
 
 _KERNEL: list = []  # [ctypes function or None], filled once
 
@@ -38,7 +40,7 @@ def _cython_dposv():
         get_pointer = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.c_char_p)(
             ("PyCapsule_GetPointer", ctypes.pythonapi))
         name = get_name(capsule)
-        if name is None or name.decode() != _DPOSV_SIGNATURE:
+        if name is None or not _DPOSV_SIGNATURE.fullmatch(name.decode()):
             return None
         pointer = get_pointer(capsule, name)
     except (ImportError, AttributeError, KeyError, ValueError, TypeError):  # pragma: no cover - other SciPy builds

@@ -9,6 +9,7 @@ import trimesh
 from facebasis.defaults.face import default_template
 from facebasis.errors import MeshError
 from facebasis.geometry.meshio import read_mesh
+from facebasis.geometry import numtext, obj
 from facebasis.geometry.obj import _read_general, obj_bytes, read_obj
 
 from conftest import bumpy_sheet, grid_sheet
@@ -140,3 +141,134 @@ def test_face_lines_are_cached_per_topology_never_reused_for_another():
     F2 = np.array([[0, 1, 2], [3, 5, 4]])  # same shape, other faces
     for F in (F1, F2, F1, F2):
         assert obj_bytes(V, F) == _trimesh_bytes(V, F)
+
+
+# --- the loop-free kernels (facebasis.geometry.numtext) against Python's own parsing and formatting
+
+def _v_text(numbers, per_line=3):
+    """Lines ``v a b c`` of the number strings, between the blanks the kernels expect."""
+    rows = [numbers[i:i + per_line] for i in range(0, len(numbers), per_line)]
+    body = "".join("v " + " ".join(r) + "\n" for r in rows).encode()
+    text = numtext.PAD + body + numtext.PAD
+    return text, np.flatnonzero(np.frombuffer(text, np.uint8) == 10)
+
+
+@pytest.mark.parametrize("decimals", [0, 1, 6, 10, 14])
+def test_fixed_decimal_numbers_are_parsed_as_float_parses_them(decimals):
+    rng = np.random.default_rng(decimals)
+    x = np.concatenate([rng.normal(size=300) * 10.0 ** rng.integers(-8, 7, 300), [0.0, -0.0, 9999999.5, -1e-20]])
+    strings = ["%#.*f" % (decimals, v) for v in x]  # "#": "5." with no decimals
+    strings = [s for s in strings if len(s.split(".")[0]) <= 7 and len(s.replace("-", "")) <= 16]
+    strings = strings[:len(strings) // 3 * 3]
+    per, vals = numtext.fast_floats(*_v_text(strings))
+    expected = np.array([float(s) for s in strings])
+    assert (per == 3).all() and np.array_equal(vals, expected)
+    assert np.array_equal(np.signbit(vals), np.signbit(expected))  # "-0.000" stays negative
+
+
+def test_number_forms_the_kernel_leaves_to_fromstring():
+    for ok in (["5.", "-0.", "7."], ["-.5", ".2", "0.7"]):
+        vals = numtext.fast_floats(*_v_text(ok))[1]
+        assert np.array_equal(vals, [float(s) for s in ok]) and np.array_equal(np.signbit(vals), [s[0] == "-" for s in ok])
+    for odd in (["1.5", "2.25", "3.5"],  # decimals differ from the first number's
+                ["1.5", "2.5", "1e3"], ["1.5", "2.5", "3"], ["1.5", "2.5", "+3.5"], ["1.5", "2.5", "nan"],
+                ["1.5", "2.5", "12345678.5"], ["1.5", "2.5", "-1234567.5"],  # 8 characters before the point
+                ["1.5", "2.5", "3.5", "4.5", "5.5", "."], ["1.5", "2.5", "-"], ["1.5", "2.5", "1.2.5"],
+                ["9007199254.7409930"[:13], "1.000", "2.000"], ["1.5", "2.5", "3.5x"]):
+        assert numtext.fast_floats(*_v_text(odd)) is None, odd
+    big = "%.9f" % 9007199.254740993  # 16 digits: more than 2**53
+    assert numtext.fast_floats(*_v_text([big, big, big])) is None
+
+
+def test_references_with_slashes_and_polygons():
+    text = numtext.PAD + b"f 1 22 333\nf 4/1 5/2/3 6//7 7/8\nf 1234567 2 3\n" + numtext.PAD
+    per, refs = numtext.fast_refs(text, np.flatnonzero(np.frombuffer(text, np.uint8) == 10))
+    assert per.tolist() == [3, 4, 3] and refs.tolist() == [1, 22, 333, 4, 5, 6, 7, 1234567, 2, 3]
+    for odd in (b"f 1  2 3\n", b"f 1 2 3 \n", b"f 1\t2 3\n", b"f 1 2 /3\n", b"f 1 2 x\n", b"f 1 2 -3\n",
+                b"f 1 2 12345678\n", b"f 1 2 3x\n"):
+        text = numtext.PAD + odd + numtext.PAD
+        assert numtext.fast_refs(text, np.flatnonzero(np.frombuffer(text, np.uint8) == 10)) is None, odd
+
+
+def test_vertex_lines_are_percent_10f():
+    rng = np.random.default_rng(5)
+    V = np.concatenate([rng.normal(size=(400, 3)) * 10.0 ** rng.integers(-12, 3, (400, 1)),
+                        rng.integers(-2**21, 2**21, (300, 3)) / 2048.0,  # exact ties in the 11th decimal
+                        rng.uniform(-2047.99, 2047.99, (300, 3)),
+                        [[0.0, -0.0, 2047.99999999995], [5e-11, -5e-11, 1.5e-10], [5e-324, -5e-324, 1e-10]]])
+    assert numtext.vertex_lines(V) == (("v %.10f %.10f %.10f\n" * len(V)) % tuple(V.ravel())).encode()
+    for out_of_range in ([[2048.0, 0, 0]], [[np.nan, 0, 0]], [[0, -np.inf, 0]]):
+        assert numtext.vertex_lines(np.array(out_of_range)) is None
+
+
+@pytest.mark.parametrize("V", [np.array([[3000.5, -1e9, 0.25], [np.nan, 1.0, np.inf], [0.0, 1.0, 2.0]]),
+                               np.random.default_rng(1).normal(size=(3, 3))])
+def test_writer_falls_back_to_python_formatting(V):
+    F = np.array([[0, 1, 2]])
+    assert obj_bytes(V, F) == (("v %.10f %.10f %.10f\n" * 3) % tuple(V.ravel())).encode() + b"f 1 2 3\n\n"
+
+
+def test_face_lines_with_large_indices():
+    F = np.array([[0, 9999, 10000], [123456, 99999998, 5], [99999997, 1, 2]])
+    assert numtext.face_lines(F) == (("f %d %d %d\n" * 3) % tuple((F + 1).ravel())).encode()
+    assert numtext.face_lines(np.array([[0, 1, 99999999]])) is None  # 9 digits: Python formats it
+    assert obj_bytes(np.zeros((3, 3)), np.array([[0, 1, 99999999]])).endswith(b"f 1 2 100000000\n\n")
+
+
+def _random_obj(rng, decimals, style):
+    nv = int(rng.integers(4, 40))
+    V = rng.normal(size=(nv, 3)) * 10.0 ** rng.integers(-3, min(4, 13 - decimals))
+    lines = ["v " + " ".join("%.*f" % (decimals, x) for x in row) for row in V]
+    for _ in range(int(rng.integers(1, 30))):
+        k = int(rng.choice([3, 3, 4, 5]))
+        refs = rng.integers(1, nv + 1, k)
+        form = {"plain": "{}", "vt": "{}/1", "vtvn": "{}/2/1", "vn": "{}//1"}[style]
+        lines.append("f " + " ".join(form.format(r) for r in refs))
+    if rng.random() < 0.5:
+        lines.insert(int(rng.integers(0, len(lines))), "usemtl skin")
+    return ("\n".join(lines) + "\n").encode()
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_fast_and_general_readers_agree(tmp_path, seed):
+    """Random files the fast kernels take (fixed decimals, slashes, n-gons, materials): the result
+    equals the general reader's, which parses with np.fromstring, and the fast kernels were used."""
+    rng = np.random.default_rng(seed)
+    data = _random_obj(rng, int(rng.choice([1, 2, 6, 10, 13])), ["plain", "vt", "vtvn", "vn"][seed % 4])
+    path = tmp_path / "r.obj"
+    path.write_bytes(data)
+    obj._FACE_CACHE.clear()
+    V1, F1 = read_obj(path)
+    V2, F2 = _read_general(data, "r.obj")
+    assert np.array_equal(V1, V2) and np.array_equal(F1, F2)
+    assert np.array_equal(np.signbit(V1), np.signbit(V2))
+    text, v_nl = obj._lines_of(data, *_lines_and_kinds(data), obj._V)
+    assert numtext.fast_floats(text, v_nl) is not None
+
+
+def _lines_and_kinds(data):
+    raw = np.frombuffer(data, np.uint8)
+    nl = np.flatnonzero(raw == 10)
+    starts = np.r_[0, nl[:-1] + 1]
+    c0, c1 = raw[starts], raw[starts + 1]
+    kind = np.where((c0 == ord("v")) & (c1 == 32), obj._V, np.where((c0 == ord("f")) & (c1 == 32), obj._F, 0))
+    return raw, kind.astype(np.int8), starts, nl
+
+
+def test_face_cache_is_keyed_by_the_face_lines(tmp_path):
+    """Shapes of one rig share their f lines (parsed once); another topology is never served the
+    cached faces, and neither is a file with the same f lines but too few vertices."""
+    V, F = grid_sheet(5, 4)
+    F2 = F[:, [0, 2, 1]]
+    a, b, c = tmp_path / "a.obj", tmp_path / "b.obj", tmp_path / "c.obj"
+    a.write_bytes(obj_bytes(V, F))
+    b.write_bytes(obj_bytes(V + 1.0, F))
+    c.write_bytes(obj_bytes(V, F2))
+    for path, (V_ref, F_ref) in ((a, (V, F)), (b, (V + 1.0, F)), (c, (V, F2)), (a, (V, F))):
+        V1, F1 = read_obj(path)
+        assert np.array_equal(F1, F_ref) and np.allclose(V1, V_ref, atol=1e-10, rtol=0)
+    lines = obj_bytes(V, F).split(b"\n")
+    short = tmp_path / "short.obj"  # the last v line dropped, the f lines of a.obj kept
+    short.write_bytes(b"\n".join(lines[:len(V) - 1] + lines[len(V):]))
+    with pytest.raises(MeshError, match=f"expected an index of one of the {len(V) - 1} vertices defined, found {len(V)}"):
+        read_obj(short)

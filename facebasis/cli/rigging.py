@@ -189,6 +189,10 @@ def _contact_verdict(contact, what: str, excluded) -> int:
         print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
               f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
         return 1
+    retreated = [f"{s.name} ({s.retreated} vertices)" for s in contact.shapes if not s.excluded and s.retreated]
+    if retreated:
+        print(f"exact contact: the solve-and-check rounds left pairs in {len(retreated)} shape(s); they were "
+              f"pulled back towards the target neutral around those pairs: {', '.join(retreated)}")
     print(f"exact check: no {what} shape has a triangle pair intersecting that does not intersect in the "
           "target neutral or in the template shape" + (f" (excluded: {', '.join(excluded)})" if excluded else ""))
     return 0

@@ -3,7 +3,10 @@
 The rig of :func:`~facebasis.rigging.generation.generate_blendshapes` is corrected shape by shape
 by :func:`facebasis.contact.exact.contact_correct` (Li, Shen, Liu 2023 extended to an exact
 guarantee: no triangle pair intersects in a generated shape unless it intersects in the target
-neutral or in the template shape; checked by the package's exact counter after every solve). The
+neutral or in the template shape; checked by the package's exact counter after every solve). A shape
+the smallest-displacement rounds leave with pairs is solved again with the transfer energy
+(``fallback`` in its report), and pairs still left then are removed by pulling the shape back
+towards the target neutral around them (``retreated``), so the exact check ends clean. The
 stored weights must then be the certified optimum of eq. 5 (Gao et al. 2015) for the shapes
 actually written, so the final weight step is solved once more at the run's final lambda and the
 training residuals are recomputed. The contact inputs are checked before generation by

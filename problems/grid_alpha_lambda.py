@@ -38,6 +38,9 @@ def main(argv=None) -> int:
     ap.add_argument("--heldout", type=int, default=200)
     ap.add_argument("--out", default="reports/examples_study")
     args = ap.parse_args(argv)
+    for flag, value in (("--m", args.m), ("--heldout", args.heldout)):
+        if value < 1:
+            ap.error(f"{flag}: expected a positive count, found {value}")
     if not ict_available():
         print(f"ICT data not found at {ict_path()}", file=sys.stderr)
         return 2

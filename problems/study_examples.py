@@ -222,6 +222,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.heldout < 1:
         ap.error(f"--heldout: expected a positive count, found {args.heldout}")
+    counts = {r.get("n_heldout", 20) for r in load_rows(Path(args.out))}
+    if counts and counts != {args.heldout}:  # ratios between methods must share one held-out set
+        ap.error(f"--heldout: expected {', '.join(map(str, sorted(counts)))} as in {args.out}/rows.json (a folder's "
+                 f"rows share one count), found {args.heldout}; use another --out")
     from problems.ict import ict_available, ict_path
 
     if not ict_available():

@@ -272,3 +272,33 @@ def test_face_cache_is_keyed_by_the_face_lines(tmp_path):
     short.write_bytes(b"\n".join(lines[:len(V) - 1] + lines[len(V):]))
     with pytest.raises(MeshError, match=f"expected an index of one of the {len(V) - 1} vertices defined, found {len(V)}"):
         read_obj(short)
+
+
+def test_crlf_files_read_as_their_lf_twins_on_the_fast_path(tmp_path, monkeypatch):
+    """CRLF line ends give the arrays of the same file with LF, through the fast kernels (not the
+    slow fallback: the f-line cache fills), and a lone CR still separates like a blank."""
+    tpl = default_template()
+    lf = obj_bytes(tpl.neutral, tpl.faces)
+    (tmp_path / "lf.obj").write_bytes(lf)
+    (tmp_path / "crlf.obj").write_bytes(lf.replace(b"\n", b"\r\n"))
+    V0, F0 = read_obj(tmp_path / "lf.obj")
+    monkeypatch.setattr(obj, "_FACE_CACHE", [])
+    V1, F1 = read_obj(tmp_path / "crlf.obj")
+    np.testing.assert_array_equal(V1, V0)
+    np.testing.assert_array_equal(F1, F0)
+    assert len(obj._FACE_CACHE) == 1  # fast_refs took the f lines
+    (tmp_path / "cr.obj").write_bytes(b"v 0 0 0\rv 1 0 0\n v 0 1 0\nf 1 2 3\n".replace(b"\rv 1", b"\nv\r1"))
+    V2, F2 = read_obj(tmp_path / "cr.obj")
+    np.testing.assert_array_equal(V2, [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+
+
+def test_cached_face_arrays_cannot_be_written(tmp_path, monkeypatch):
+    tpl = default_template()
+    (tmp_path / "a.obj").write_bytes(obj_bytes(tpl.neutral, tpl.faces))
+    monkeypatch.setattr(obj, "_FACE_CACHE", [])
+    _, F = read_obj(tmp_path / "a.obj")
+    (_, (k, refs)), = obj._FACE_CACHE
+    assert not k.flags.writeable and not refs.flags.writeable
+    F[0] = 0  # the caller's array is its own copy
+    _, F2 = read_obj(tmp_path / "a.obj")
+    np.testing.assert_array_equal(F2, tpl.faces)

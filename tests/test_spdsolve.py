@@ -54,7 +54,7 @@ def test_posv_rows_on_threads_equals_serial():
 def test_not_positive_definite_names_the_system_and_lapack_info(use_kernel):
     A, B = _systems(n=5, k=4)
     A[3] = -np.eye(4)  # leading minor of order 1 is negative
-    with pytest.raises(SolverError, match=r"system 3 of 5 \(LAPACK dposv info 1\)") as err:
+    with pytest.raises(SolverError, match=r"system 3 of 5: not positive definite \(LAPACK dposv info 1\)") as err:
         posv_rows(A, B, use_kernel=use_kernel)
     assert err.value.status == "1"
 
@@ -85,3 +85,29 @@ def test_only_the_expected_dposv_signature_is_called_through_ctypes():
                              "__pyx_t_5scipy_6linalg_13cython_lapack_s *, int *, int *)")
     assert not sig.fullmatch(f"void (char *, int *, int *, {d} *, int *, {d} *, int *)")
     assert not sig.fullmatch(f"int (char *, int *, int *, {d} *, int *, {d} *, int *, int *)")
+
+
+@pytest.mark.parametrize("use_kernel", [True, False])
+def test_empty_systems_are_a_no_op_and_aliasing_is_refused(use_kernel):
+    A, B = _systems(n=3, k=4, r=2)
+    posv_rows(np.empty((0, 4, 4)), np.empty((0, 2, 4)), use_kernel=use_kernel)
+    posv_rows(np.empty((3, 0, 0)), np.empty((3, 2, 0)), use_kernel=use_kernel)
+    posv_rows(A.copy(), np.empty((3, 0, 4)), use_kernel=use_kernel)
+    with pytest.raises(InputError, match="B: expected an array apart from A, found one sharing its memory"):
+        posv_rows(A, A, use_kernel=use_kernel)
+
+
+def test_basis_rows_accepts_any_layout_of_its_inputs():
+    """A non-contiguous prior (a transposed view) gives the same blendshape frames as a C-ordered one."""
+    from facebasis.rigging.basis import basis_rows
+
+    rng = np.random.default_rng(3)
+    k, m, t = 6, 8, 40  # m >= 0.6 k: the direct Cholesky path
+    X = rng.uniform(0, 1, (k, m))
+    RT = rng.standard_normal((t, 6, m))
+    A_km = rng.standard_normal((k, 6, t))
+    w = rng.uniform(1, 10, (t, k))
+    ref, ef, er = basis_rows(X, RT, np.ascontiguousarray(A_km.transpose(2, 1, 0)), w, 0.3)
+    out, ef2, er2 = basis_rows(X, RT, A_km.transpose(2, 1, 0), w, 0.3)
+    np.testing.assert_array_equal(out, ref)
+    assert (ef2, er2) == (ef, er)

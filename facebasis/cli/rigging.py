@@ -189,10 +189,11 @@ def _contact_verdict(contact, what: str, excluded) -> int:
         print(f"CONTACT NOT MET: {len(bad)} shape(s) keep new intersecting pairs after the exact check "
               f"({', '.join(bad)}); they are written as solved", file=sys.stderr)
         return 1
-    retreated = [f"{s.name} ({s.retreated} vertices)" for s in contact.shapes if not s.excluded and s.retreated]
-    if retreated:
+    retreated = [f"{s.name} ({s.retreated} vertices, {100 * s.retreat_loss:.1f}% of its delta)"
+                 for s in contact.shapes if not s.excluded and s.retreated]
+    if retreated:  # intersection-free, but less of the shape: the user should see it
         print(f"exact contact: the solve-and-check rounds left pairs in {len(retreated)} shape(s); they were "
-              f"pulled back towards the target neutral around those pairs: {', '.join(retreated)}")
+              f"pulled back towards the target neutral around those pairs: {', '.join(retreated)}", file=sys.stderr)
     print(f"exact check: no {what} shape has a triangle pair intersecting that does not intersect in the "
           "target neutral or in the template shape" + (f" (excluded: {', '.join(excluded)})" if excluded else ""))
     return 0

@@ -82,7 +82,7 @@ POLISH_RATIO = 0.1
 #: vertices moving less than this (median edge lengths) count as still in the plain solution's check
 STILL_EDGES = 0.1
 #: rounds of the transfer-energy fallback, in multiples of ``max_iterations``
-FALLBACK_ROUNDS = 2
+FALLBACK_ROUNDS = 1
 
 
 
@@ -94,7 +94,8 @@ class ContactShape:
     active-set iterations summed over rounds; ``moved`` vertices in the region allowed to move;
     ``fallback`` solved with the transfer energy alone after the stiff energy left pairs;
     ``retreated`` vertices pulled back towards the target neutral by the last resort
-    (:meth:`ContactSolver._retreat`) because the rounds still left pairs (0 = not needed)."""
+    (:meth:`ContactSolver._retreat`) because the rounds still left pairs (0 = not needed), and
+    ``retreat_loss`` the part of the shape's delta it removed (norm over vertices, relative)."""
 
     name: str
     excluded: bool = False
@@ -109,6 +110,7 @@ class ContactShape:
     seconds: float = 0.0
     fallback: bool = False
     retreated: int = 0
+    retreat_loss: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -140,7 +142,8 @@ class ContactResult:
             lines.append(f"{s.name:18s} {s.plain_new_pairs:6d} {s.new_pairs_left:5d} {s.constrained_pairs:6d} "
                          f"{s.rows:5d} {s.iterations:6d} {s.solver_iterations:7d} {s.moved:6d} "
                          f"{s.min_distance:9.4f} {s.seconds:6.2f}" + ("  (transfer energy)" if s.fallback else "")
-                         + (f"  (retreated {s.retreated} vertices towards the neutral)" if s.retreated else ""))
+                         + (f"  (retreated {s.retreated} vertices towards the neutral, {100 * s.retreat_loss:.1f}% of "
+                            "its delta)" if s.retreated else ""))
         return "\n".join(lines)
 
 
@@ -229,8 +232,11 @@ class ContactSolver:
                 rep = replace(rep0, fallback=True, seconds=rep.seconds + rep0.seconds)
         if len(left):
             t0 = time.perf_counter()
+            solved = d
             d, retreated = self._retreat(d, self.dt.template.neutral + template_delta, left)
-            rep = replace(rep, new_pairs_left=0, retreated=retreated, seconds=rep.seconds + time.perf_counter() - t0)
+            loss = float(np.linalg.norm(solved - d) / max(np.linalg.norm(solved), 1e-300))
+            rep = replace(rep, new_pairs_left=0, retreated=retreated, retreat_loss=loss, min_distance=float("nan"),
+                          seconds=rep.seconds + time.perf_counter() - t0)  # distances of the solve no longer hold
         return d, rep
 
     def _retreat(self, d, S, left):

@@ -96,8 +96,8 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """
     name = str(path)
     raw = Path(path).read_bytes()
-    if b"\r" in raw:
-        raw = raw.replace(b"\r", b" ")
+    if b"\r" in raw:  # CRLF line ends as LF (the fast path then still applies), a lone CR as a blank
+        raw = raw.replace(b"\r\n", b"\n").replace(b"\r", b" ")
     fast = _read_plain(raw, name)
     if fast is not None:
         return fast
@@ -143,6 +143,8 @@ def _read_plain(raw: bytes, name: str):
     if fast_f is None:
         fast_f = fast_refs(ftext, f_nl)
         if fast_f is not None:
+            for a in fast_f:  # shared by later reads: nobody may write into them
+                a.flags.writeable = False
             _FACE_CACHE[:] = [(ftext, fast_f)] + _FACE_CACHE[:3]
     if fast_v is not None:
         per_v, nums = fast_v

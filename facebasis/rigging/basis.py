@@ -174,6 +174,7 @@ def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
     m_tri = RT.shape[0]
     X = np.ascontiguousarray(X, dtype=np.float64)
     RT = np.ascontiguousarray(RT, dtype=np.float64)
+    AT = np.ascontiguousarray(AT, dtype=np.float64)
     XX = X @ X.T if use_direct(k, m) else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
     out = np.empty((2, m_tri, 3, k))
     blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]

@@ -71,6 +71,11 @@ def _check(A, B):
         raise InputError(f"posv_rows: B: expected a writeable C-contiguous float64 array ({n}, r, {k}), found {found}")
 
 
+def _failure(t: int, n: int, info: int) -> str:
+    what = ("not positive definite" if info > 0 else f"argument {-info} illegal")
+    return f"Cholesky solve failed on system {t} of {n}: {what} (LAPACK dposv info {info})"
+
+
 def posv_rows(A: np.ndarray, B: np.ndarray, *, use_kernel: bool = True) -> None:
     """Solve ``A_t Y_t^T = B_t^T`` for every t in place (Cholesky, LAPACK ``dposv``).
 
@@ -87,10 +92,16 @@ def posv_rows(A: np.ndarray, B: np.ndarray, *, use_kernel: bool = True) -> None:
     SolverError
         a matrix that is not positive definite, with LAPACK's ``info`` (the order of the leading
         minor that is not positive) and the index of the system.
+    InputError
+        arrays of another type, shape or layout, or B sharing memory with A (before any solve).
     """
     _check(A, B)
     n, k = A.shape[:2]
     r = B.shape[1]
+    if n == 0 or k == 0 or r == 0:
+        return
+    if np.may_share_memory(A, B):
+        raise InputError("posv_rows: B: expected an array apart from A, found one sharing its memory")
     f = kernel() if use_kernel else None
     if f is None:
         from scipy.linalg import lapack
@@ -98,7 +109,7 @@ def posv_rows(A: np.ndarray, B: np.ndarray, *, use_kernel: bool = True) -> None:
         for t in range(n):  # one LAPACK call per system; A symmetric, so its transpose is itself
             _, _, info = lapack.dposv(A[t].T, B[t].T, lower=1, overwrite_a=1, overwrite_b=1)
             if info != 0:
-                raise SolverError(f"Cholesky solve failed on system {t} of {n} (LAPACK dposv info {info})", str(info))
+                raise SolverError(_failure(t, n, info), str(info))
         return
     order, nrhs, info = ctypes.c_int(k), ctypes.c_int(r), ctypes.c_int(0)
     p_order, p_nrhs, p_info = ctypes.byref(order), ctypes.byref(nrhs), ctypes.byref(info)
@@ -109,5 +120,4 @@ def posv_rows(A: np.ndarray, B: np.ndarray, *, use_kernel: bool = True) -> None:
     for t in range(n):  # one LAPACK call per system, without the GIL
         f(uplo, p_order, p_nrhs, c_void_p(a0 + t * sa), p_order, c_void_p(b0 + t * sb), p_order, p_info)
         if info.value != 0:
-            raise SolverError(f"Cholesky solve failed on system {t} of {n} (LAPACK dposv info {info.value})",
-                              str(info.value))
+            raise SolverError(_failure(t, n, info.value), str(info.value))

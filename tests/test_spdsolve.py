@@ -111,3 +111,20 @@ def test_basis_rows_accepts_any_layout_of_its_inputs():
     out, ef2, er2 = basis_rows(X, RT, A_km.transpose(2, 1, 0), w, 0.3)
     np.testing.assert_array_equal(out, ref)
     assert (ef2, er2) == (ef, er)
+
+
+def test_basis_rows_writes_into_a_given_buffer_and_checks_it():
+    from facebasis.rigging.basis import basis_rows
+
+    rng = np.random.default_rng(4)
+    k, m, t = 5, 6, 30
+    args = (rng.uniform(0, 1, (k, m)), rng.standard_normal((t, 6, m)), rng.standard_normal((t, 6, k)),
+            rng.uniform(1, 10, (t, k)), 0.2)
+    ref, ef, er = basis_rows(*args)
+    buf = np.full((2, t, 3, k), np.nan)
+    out, ef2, er2 = basis_rows(*args, out=buf)
+    assert out is buf and (ef2, er2) == (ef, er)
+    np.testing.assert_array_equal(buf, ref)
+    with pytest.raises(InputError, match=r"basis_rows: out: expected a C-contiguous float64 array of shape "
+                                         r"\(2, 30, 3, 5\), found float32 \(2, 30, 3, 5\)"):
+        basis_rows(*args, out=buf.astype(np.float32))

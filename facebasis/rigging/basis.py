@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 
-from ..errors import SolverError
+from ..errors import InputError, SolverError
 from .spdsolve import posv_rows
 
 
@@ -157,7 +157,7 @@ def _basis_block(X, XX, RT, AT, w, alpha, out, s):
     return _block_energies(X, Rs, XR, Y, As, wt, alpha)
 
 
-def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
+def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK, out=None):
     """Eq. 4 for every triangle in the triangle-first layout of :func:`_basis_block`.
 
     Parameters
@@ -166,6 +166,9 @@ def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
     RT : (m_tri, 6, m) training rows (:func:`training_rows`), C-contiguous
     AT : (m_tri, 6, k) prior rows (:func:`to_triangle_major`)
     w : (m_tri, k) regulariser weights; alpha : > 0
+    out : optional (2, m_tri, 3, k) float64 C-contiguous array to write into (a caller repeating
+        the step reuses one buffer: a fresh 70 MB array per step on ICT at k = 53 costs its page
+        faults every time)
 
     Returns (out (2, m_tri, 3, k), E_fit, E_reg); ``out.reshape(2 m_tri, 3k)`` is what
     :meth:`facebasis.geometry.poisson.EdgePoisson.solve_frame_rows` takes.
@@ -176,7 +179,11 @@ def basis_rows(X, RT, AT, w, alpha, *, executor=None, block: int = BASIS_BLOCK):
     RT = np.ascontiguousarray(RT, dtype=np.float64)
     AT = np.ascontiguousarray(AT, dtype=np.float64)
     XX = X @ X.T if use_direct(k, m) else (X[:, :, None] * X[:, None, :]).reshape(k, m * m)
-    out = np.empty((2, m_tri, 3, k))
+    if out is None:
+        out = np.empty((2, m_tri, 3, k))
+    elif out.shape != (2, m_tri, 3, k) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise InputError(f"basis_rows: out: expected a C-contiguous float64 array of shape {(2, m_tri, 3, k)}, found "
+                         f"{out.dtype} {out.shape}")
     blocks = [slice(i, min(i + block, m_tri)) for i in range(0, m_tri, block)]
     if executor is None:
         parts = [_basis_block(X, XX, RT, AT, w, alpha, out, s) for s in blocks]

@@ -299,11 +299,12 @@ class BlendshapeGenerator:
 
     def _iterate(self, X, schedule, pool, progress):
         history = []
+        rows = None  # the basis step's output, one buffer for all alternations (reconstruct copies out of it)
         for it, (alpha, lam) in enumerate(schedule):
             t0 = time.perf_counter()
             # parallel over blocks of triangles (pool), not inside BLAS
             with threadpool_limits(1):  # one BLAS thread: spinning OpenBLAS threads cost 10x on a busy machine
-                rows, e_fit, e_reg = basis_rows(X.T, self.R, self.A_tilde, self.w, alpha, executor=pool)
+                rows, e_fit, e_reg = basis_rows(X.T, self.R, self.A_tilde, self.w, alpha, executor=pool, out=rows)
             Bv = self.reconstruct(rows)
             t1 = time.perf_counter()
             sol = self.weight_step(Bv, lam, X0=X, ipopt=self._runs_ipopt(it, len(schedule)))

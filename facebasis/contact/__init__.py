@@ -14,6 +14,7 @@ virtual_edges  detection, thinning, targets and the energy's operator
 penetration    exact triangle-pair intersection, new-pair reports, local folds vs layer crossings
 proximity      fast conservative pair search (k-d trees of bounding balls), triangle-triangle distances
 solver         exact contact for one shape: separating planes, the QP, the exact check after every solve
+retreat        the last resort: a shape pulled back towards the target neutral around pairs left
 qp             the separation QP: the transfer's normal matrix, the plane rows, ADMM (OSQP's splitting)
 exact          exact contact for transferred and generated rigs (``contact_transfer``, ``contact_correct``),
                input checks, shapes in forked worker processes

@@ -71,6 +71,7 @@ from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
 from .proximity import candidate_pairs, intersecting, new_pairs, triangle_distance
 from .qp import Cholesky, admm, normal_matrix, separation_rows
+from .retreat import retreat
 
 #: default margin kept between constrained triangles, in median edge lengths of the target neutral
 MARGIN_EDGES = 0.05
@@ -240,28 +241,8 @@ class ContactSolver:
         return d, rep
 
     def _retreat(self, d, S, left):
-        """The last resort: the delta pulled back towards the target neutral around the pairs ``left``
-        (q, 2) until the exact check finds no new pair. Vertices within ``r`` (in ``B0``) of those
-        pairs' corners take ``B0``, the next ``r`` blend linearly to ``d``; ``r`` starts at ``reach``
-        and doubles (the pairs found on the way join the centres). It ends: once ``r`` covers the
-        mesh the shape is ``B0`` itself, which has no new pair. Returns the delta (n, 3) and the number
-        of vertices moved."""
-        F, B0 = self.F, self.B0
-        centres = np.unique(F[left].ravel())
-        r = self.reach
-        span = float(np.linalg.norm(B0.max(0) - B0.min(0)))
-        while True:
-            dist, _ = cKDTree(B0[centres]).query(B0, distance_upper_bound=2.0 * r)
-            w = np.clip(2.0 - dist / r, 0.0, 1.0)  # 1 within r, 0 beyond 2 r (dist inf there)
-            out = d * (1.0 - w)[:, None]
-            touch = (self.vf.T @ (w > 0).astype(np.float64)) > 0
-            found = new_pairs(B0 + out, F, (B0, S), faces=touch)
-            if len(found) == 0 or r > span:
-                if len(found):  # cannot happen: the shape is B0 itself
-                    raise SolverError(f"contact: expected no new pair at the target neutral, found {len(found)}")
-                return out, int((w > 0).sum())
-            centres = np.union1d(centres, F[found].ravel())
-            r *= 2.0
+        """The last resort (:func:`facebasis.contact.retreat.retreat`): (delta, vertices moved)."""
+        return retreat(d, self.B0, self.F, S, left, self.reach, self.vf)
 
     def _correct(self, name, d_plain, template_delta, L, rounds):
         import daqp

@@ -197,7 +197,8 @@ def summarise(rows, out: Path) -> None:
     ax.set_xlabel("training expressions m (log scale)")
     ax.set_ylabel("held-out relative error\n||B0 + Bx - T|| / ||T - B0|| (log)")
     seeds = sorted({r["seed"] for r in rows})
-    ax.set_title(f"ICT person problems, seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}: mean"
+    ax.set_title(f"ICT person problems, seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}, "
+                 f"{' / '.join(map(str, counts))} held-out expressions each: mean"
                  + (", bars min..max over the seeds" if len(seeds) > 1 else ""), fontsize=8)
     # legend outside the axes: never over the data
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)

@@ -308,9 +308,18 @@ def test_cli_transfer_with_contact(tmp_path, capsys):
     refs = [target, rig.neutral + rig.deltas[0]]
     assert len(penetration_report(V_plain, F, refs).new) > 0
     assert len(penetration_report(V_contact, F, refs).new) == 0
+    import json
+
+    record = json.loads((tmp_path / "contact" / "contact.json").read_text())  # the verdict kept with the shapes
+    push = next(r for r in record["shapes"] if r["name"] == "push")
+    assert record["ok"] is True and record["excluded"] == [] and push["plain_new_pairs"] > 0
+    assert push["new_pairs_left"] == 0 and push["constrained_pairs"] > 0 and push["min_distance"] > 0
+    assert not (tmp_path / "plain" / "contact.json").exists()
     assert main(base + ["--out", str(tmp_path / "excluded"), "--contact", "--contact-exclude", "push",
                         "--contact-exclude", "still"]) == 0
     assert np.allclose(read_mesh(tmp_path / "excluded" / "push.obj")[0], V_plain, atol=1e-9)
+    excl = json.loads((tmp_path / "excluded" / "contact.json").read_text())
+    assert sorted(excl["excluded"]) == ["push", "still"]
     capsys.readouterr()
     assert main(base + ["--out", str(tmp_path / "x"), "--contact-exclude", "push"]) == 2
     assert "expected --contact as well" in capsys.readouterr().err
@@ -342,6 +351,11 @@ def test_rig_cli_contact_generated_shapes_have_no_new_pairs(tmp_path, capsys):
     assert "exact check: no generated shape" in out
     # per shape: solve-and-check rounds, solver iterations and the smallest distance kept
     assert "rounds" in out and "QP it" in out and "min dist" in out
+    import json
+
+    record = json.loads((tmp_path / "run" / "contact.json").read_text())
+    assert record["ok"] is True and len(record["shapes"]) == pp.problem.template.n_shapes
+    assert all(r["new_pairs_left"] == 0 for r in record["shapes"]) and record["seconds"]["total"] > 0
     template = load_rig_folder(root / "template")
     gen = load_rig_folder(tmp_path / "run")
     assert set(gen.names) == set(template.names)

@@ -42,6 +42,8 @@ def cmd_transfer(args) -> int:
     seconds = time.perf_counter() - t0
     with atomic_directory(args.out) as stage:
         write_shapes(stage, result)
+        if contact is not None:
+            _write_contact(stage, contact)
     print(f"transferred {result.n_shapes} shapes onto {args.target} in {seconds:.3f} s -> {args.out}")
     if contact is not None:
         print(contact.table())
@@ -173,6 +175,8 @@ def cmd_rig(args) -> int:
                "target": args.target}
     with atomic_directory(args.out) as stage:
         write_rig_run(stage, result, options, problem, args.examples, args.weights, sources=sources)
+        if contact is not None:
+            _write_contact(stage, contact)
     _warnings(result, options, list(names))
     print(f"generated {template.n_shapes} blendshapes in {result.seconds + result.precompute_seconds:.2f} s -> {args.out}")
     if contact is not None:
@@ -180,6 +184,13 @@ def cmd_rig(args) -> int:
         print(f"exact contact: {contact.seconds['total']:.2f} s")
         return _contact_verdict(contact, "generated", args.contact_exclude)
     return 0
+
+
+def _write_contact(stage, contact) -> None:
+    """``contact.json``: the exact check's verdict and the per-shape table, kept with the shapes."""
+    import json
+
+    (stage / "contact.json").write_text(json.dumps(contact.record(), indent=1))
 
 
 def _contact_verdict(contact, what: str, excluded) -> int:

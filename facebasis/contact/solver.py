@@ -59,7 +59,7 @@ References
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -146,6 +146,16 @@ class ContactResult:
                          + (f"  (retreated {s.retreated} vertices towards the neutral, {100 * s.retreat_loss:.1f}% of "
                             "its delta)" if s.retreated else ""))
         return "\n".join(lines)
+
+    def record(self) -> dict:
+        """The exact check's verdict and every shape's report as JSON-ready data (NaN as None): what
+        the commands write as ``contact.json`` beside the shapes."""
+        def clean(v):
+            return None if isinstance(v, float) and not np.isfinite(v) else v
+
+        return {"ok": self.ok, "excluded": [s.name for s in self.shapes if s.excluded],
+                "seconds": {k: clean(float(v)) for k, v in self.seconds.items()},
+                "shapes": [{k: clean(v) for k, v in asdict(s).items()} for s in self.shapes]}
 
 
 class ContactSolver:

@@ -56,6 +56,38 @@ def _remove_stale(out: Path) -> None:
                 shutil.rmtree(p, ignore_errors=True)
 
 
+def check_output_folder(out_dir, inputs=(), what: str = "--out", allow=()) -> Path:
+    """Refuse an output folder whose replacement would delete what is not an output: an empty path
+    (the current folder), the current folder or one above it, or an input (or a folder holding one).
+    Called by every command before any work, and by :func:`atomic_directory` before the swap.
+
+    ``inputs``: paths the command reads (None entries are skipped); ``allow``: inputs the output
+    may replace (``rig --resume RUN --out RUN`` updates the run in place)."""
+    from .errors import InputError
+
+    if not str(out_dir).strip():
+        raise InputError(f"{what}: expected an output folder path, found an empty string (it would "
+                         "replace the current folder)")
+    out = Path(out_dir).absolute().resolve()
+    cwd = Path.cwd().resolve()
+    if out == cwd or out in cwd.parents:
+        raise InputError(f"{what} {out_dir}: expected a new folder or a previous output, found "
+                         f"{'the current folder' if out == cwd else 'a folder above the current one'} "
+                         "(replacing it would delete everything in it)")
+    allowed = {Path(a).absolute().resolve() for a in allow if a is not None}
+    for p in inputs:
+        if p is None:
+            continue
+        q = Path(p).absolute().resolve()
+        if q in allowed:
+            continue
+        if out == q or out in q.parents:
+            raise InputError(f"{what} {out_dir}: expected a folder apart from the inputs, found "
+                             f"{'the input' if out == q else 'a folder holding the input'} {p} (replacing it "
+                             "would delete it)")
+    return out
+
+
 @contextlib.contextmanager
 def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
     """Yield a fresh staging folder that replaces ``out_dir`` only if the block succeeds.
@@ -66,12 +98,16 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
     the new folder renamed into place, and the old one removed, with SIGINT held back for those
     steps: whenever an interrupt lands, either the old or the new folder is left, and nothing else.
     """
+    check_output_folder(out_dir, what="output folder")
     out = Path(out_dir).absolute()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if out.exists() and not out.is_dir():
-        from .errors import InputError
+    from .errors import InputError
 
+    if out.exists() and not out.is_dir():
         raise InputError(f"output folder {out}: expected a folder or a new path, found a file")
+    blocker = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
+    if blocker is not None:
+        raise InputError(f"output folder {out}: expected a folder path, found the file {blocker} in it")
+    out.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale(out)
     stage = None
     try:

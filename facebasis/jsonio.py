@@ -45,7 +45,15 @@ def read_json(path: str | os.PathLike, expected: str, what: str | None = None):
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{label}: expected {expected}, found unreadable bytes ({exc})") from None
+    def unique(pairs):  # JSON allows a key twice and json.loads keeps the last: a value dropped silently
+        seen = set()
+        for k, _ in pairs:
+            if k in seen:
+                raise InputError(f"{label}: expected {expected} with each key once, found {k!r} twice in one object")
+            seen.add(k)
+        return dict(pairs)
+
     try:
-        return json.loads(text)
+        return json.loads(text.removeprefix("\ufeff"), object_pairs_hook=unique)
     except json.JSONDecodeError as exc:
         raise InputError(f"{label}: expected {expected}, found invalid JSON ({exc})") from None

@@ -48,7 +48,20 @@ CASES = [
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/nope.json --out {o}", "expected a weights JSON file, found no such file"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/notjson.json --out {o}", "expected a weights JSON file, found invalid JSON"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/list.json --out {o}", "expected a JSON object {example: {shape: weight}}, found list"),
+    # output folders that are not ours to replace (an input, a folder holding one, an empty path)
+    ("transfer --template {d}/template --target {d}/target.obj --out {d}/template", "/template: expected a folder apart from the inputs, found the input"),
+    ("transfer --template {d}/template --target {d}/target.obj --out {d}", "found a folder holding the input"),
+    ("transfer --template {d}/template --target {d}/target.obj --out ''", "--out: expected an output folder path, found an empty string"),
+    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/weights.json --out {d}/examples", "expected a folder apart from the inputs, found the input"),
+    ("transfer --template {d}/template --target {d}/target.obj --out {d}/afile/out", "/afile/out: expected a folder path, found the file"),
+    # rig options a resumed run takes from the run, contradictory options, inputs that would be dropped
+    ("rig --resume {d}/template --examples {d}/examples --weights {d}/weights.json --ipopt never --out {o}", "--resume: expected the run's own schedule and pairs, found --ipopt"),
+    ("rig --resume {d}/contactrun --examples {d}/examples --weights {d}/weights.json --out {o}", "expected a run made without --contact, found contact.json"),
+    ("rig {rig} --unobserved fit --support 0.5", "--support 0.5: expected --unobserved transfer"),
+    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/dupkeys.json --out {o}", "with each key once, found 'ex00' twice"),
+    ("transfer --template {d}/template --target {d}/utf16.obj --out {o}", "utf16.obj: expected an ASCII/UTF-8 OBJ file, found UTF-16 text"),
     # verify and export
+    ("verify {d}/template --tolerance -1", "--tolerance: expected a relative gap >= 0, found -1"),
     ("verify {d}/template", "expected inputs.json (written by `facebasis rig`), found no such file"),
     ("verify {d}/nope", "expected inputs.json"),
     ("export {d}/template --out {d}/template", "expected a file name, found a folder"),
@@ -124,6 +137,10 @@ def inputs(tmp_path_factory):
     (d / "weights.json").write_text(json.dumps({"ex00": {"jawOpen": 1.0}}))
     (d / "notjson.json").write_text("{not json")
     (d / "list.json").write_text("[1, 2]")
+    (d / "dupkeys.json").write_text('{"ex00": {"jawOpen": 1.0}, "ex00": {"jawOpen": 0.5}}')
+    (d / "utf16.obj").write_bytes("\ufeffv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("utf-16"))
+    (d / "contactrun").mkdir()
+    (d / "contactrun" / "contact.json").write_text("{}")
     (d / "empty.csv").write_text("")
     (d / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
     write_mesh(d / "huge.obj", person.neutral * 1000.0, person.faces)
@@ -180,3 +197,18 @@ def test_the_corpus_covers_every_command():
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     assert set(sub.choices) - {"demo"} <= commands, sorted(set(sub.choices) - commands)
     assert np.all([len(c) == 2 for c in CASES])
+
+
+@pytest.mark.parametrize("out", [".", "..", ""])
+def test_the_current_folder_and_those_above_are_never_replaced(inputs, tmp_path, monkeypatch, capsys, out):
+    """``--out .`` (or an unset variable: ``--out ""``) would replace the folder the user stands in."""
+    here = tmp_path / "work" / "here"
+    here.mkdir(parents=True)
+    (here / "precious.txt").write_text("keep me")
+    monkeypatch.chdir(here)
+    d = inputs
+    code = main(["transfer", "--template", str(d / "template"), "--target", str(d / "target.obj"), "--out", out])
+    err = capsys.readouterr().err
+    assert code == 2 and ("current folder" in err or "folder above the current one" in err), err
+    assert (here / "precious.txt").read_text() == "keep me"
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["here", "precious.txt", "work"]

@@ -176,3 +176,25 @@ def test_rig_says_what_it_does_with_a_single_alpha_and_with_pairs_used_together(
     assert "note: --alpha 0.3 is one number: held constant over all iterations" in out
     line = next(s for s in err.splitlines() if s.startswith("warning: exclusive pair mouthLeft:mouthRight"))
     assert "ex00" in line and "ex01" in line and "ex02" not in line
+
+
+def test_verify_flags_a_weight_on_a_shape_the_run_held_at_zero(rig_inputs, capsys):
+    """Shapes without support in the examples are held at 0 (``unobserved`` in inputs.json); a stored
+    weight on one of them is a broken constraint, not a better answer."""
+    import shutil
+
+    root, pp = rig_inputs
+    code = main(args(root, **{"--out": root / "held", "--support": "0.99"}))
+    assert code == 0
+    held = json.loads((root / "held" / "inputs.json").read_text())["unobserved"]
+    assert held, "a support of 0.99 leaves some shape without support"
+    capsys.readouterr()
+    assert main(["verify", str(root / "held")]) == 0
+    bad = root / "held_copy"
+    shutil.copytree(root / "held", bad)
+    w = json.loads((bad / "weights.json").read_text())
+    first = sorted(w)[0]
+    w[first][held[0]] = 0.01
+    (bad / "weights.json").write_text(json.dumps(w))
+    assert main(["verify", str(bad)]) == 1
+    assert f"NOT OPTIMAL: 1 of {len(w)} stored answers ({first})" in capsys.readouterr().err

@@ -302,3 +302,22 @@ def test_cached_face_arrays_cannot_be_written(tmp_path, monkeypatch):
     F[0] = 0  # the caller's array is its own copy
     _, F2 = read_obj(tmp_path / "a.obj")
     np.testing.assert_array_equal(F2, tpl.faces)
+
+
+def test_byte_order_mark_and_cr_only_line_ends(tmp_path):
+    """A UTF-8 byte-order mark (Windows editors) is not data: the first vertex stays; a file whose
+    lines end in CR alone (classic Mac) reads as its LF twin; UTF-16 is named, not misread."""
+    text = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 9 9 9\nf 1 2 3\nf 1 3 5\n"
+    (tmp_path / "lf.obj").write_bytes(text)
+    (tmp_path / "bom.obj").write_bytes(b"\xef\xbb\xbf" + text)
+    (tmp_path / "cr.obj").write_bytes(text.replace(b"\n", b"\r"))
+    V0, F0 = read_obj(tmp_path / "lf.obj")
+    for name in ("bom.obj", "cr.obj"):
+        V, F = read_obj(tmp_path / name)
+        np.testing.assert_array_equal(V, V0)
+        np.testing.assert_array_equal(F, F0)
+    (tmp_path / "u16.obj").write_bytes(text.decode().encode("utf-16"))
+    with pytest.raises(MeshError, match=r"u16.obj: expected an ASCII/UTF-8 OBJ file, found UTF-16 text"):
+        read_obj(tmp_path / "u16.obj")
+    with pytest.raises(MeshError, match=r"expected a readable OBJ file, found"):
+        read_obj(tmp_path)  # a folder

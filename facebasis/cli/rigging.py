@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 from .common import add_rig_folder_args, add_virtual_edge_args, describe_pairs, pair_of_floats, virtual_edges_for
 
 
 def cmd_transfer(args) -> int:
-    from ..atomic import atomic_directory
+    from ..atomic import atomic_directory, check_output_folder
     from ..geometry.rig import load_rig_folder, load_target_neutral, write_shapes
     from ..geometry.transfer import DeformationTransfer
 
@@ -18,6 +19,7 @@ def cmd_transfer(args) -> int:
 
     if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
         raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact_exclude:
@@ -111,7 +113,7 @@ def _warnings(result, options, names):
 
 
 def cmd_rig(args) -> int:
-    from ..atomic import atomic_directory
+    from ..atomic import atomic_directory, check_output_folder
     from ..errors import InputError
     from ..geometry.rig import load_rig_folder, load_target_neutral
     from ..rigging.examples import load_examples, load_weights, parse_pairs
@@ -131,6 +133,7 @@ def cmd_rig(args) -> int:
     if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
         raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
     options = _rig_options(args)
+    check_output_folder(args.out, (args.template, args.target, args.examples, args.weights))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact:
@@ -211,17 +214,30 @@ def _contact_verdict(contact, what: str, excluded) -> int:
 
 
 def _cmd_rig_resume(args) -> int:
-    from ..atomic import atomic_directory
+    from ..atomic import atomic_directory, check_output_folder
     from ..errors import InputError
     from ..geometry.rig import load_rig_folder
     from ..rigging.enrich import resume_run
     from ..rigging.runs import write_rig_run
 
-    if args.alpha_given or args.lam_given or args.exclusive or args.cv_given:
+    if (Path(args.resume) / "contact.json").is_file():
+        raise InputError(f"--resume {args.resume}: expected a run made without --contact, found contact.json (its "
+                         "shapes were corrected for contact; a resumed run re-generates them without it and would "
+                         "drop that guarantee); start a new run with --contact")
+    if args.alpha_given or args.lam_given or args.exclusive or args.cv_given or args.run_given:
         given = [f for f, v in (("--alpha", args.alpha_given), ("--lambda", args.lam_given),
-                                ("--exclusive", bool(args.exclusive))) if v] + args.cv_given
+                                ("--exclusive", bool(args.exclusive))) if v] + args.cv_given + args.run_given
         raise InputError(f"--resume: expected the run's own schedule and pairs, found {', '.join(given)} "
                          "(start a new run to change them)")
+    recorded = []
+    if args.resume is not None and (Path(args.resume) / "inputs.json").is_file():
+        from ..rigging.verify import read_inputs
+
+        inputs, ex_dirs, w_files = read_inputs(args.resume)  # the run's own inputs must survive too
+        src = inputs.get("sources") or {}
+        recorded = [*ex_dirs, *w_files, *(Path(args.resume) / src[k] for k in ("template", "target") if k in src)]
+    check_output_folder(args.out, (args.resume, args.template, args.target, args.examples, args.weights, *recorded),
+                        allow=(args.resume,))
     ve = None
     if args.virtual_edges is not None:
         if not args.template:
@@ -245,6 +261,10 @@ def cmd_verify(args) -> int:
     from ..rigging.examples import parse_pairs
     from ..rigging.verify import verify_run
 
+    from ..errors import InputError
+
+    if not 0 <= args.tolerance < float("inf"):
+        raise InputError(f"--tolerance: expected a relative gap >= 0, found {args.tolerance}")
     report = verify_run(args.run_dir, tolerance=args.tolerance, check_pairs=parse_pairs(args.exclusive))
     print(f"{report.run_dir}: {len(report.examples)} examples, lambda {report.lam:g}, tolerance {report.tolerance:g} "
           "(relative objective gap of the stored weights to the certified global optimum)")
@@ -261,9 +281,11 @@ def cmd_verify(args) -> int:
         if breached:
             print(f"NOT EXCLUSIVE: the stored weights breach {len(breached)} pair(s) named with --exclusive "
                   f"({', '.join(breached)})", file=sys.stderr)
-            return 1
-    if bad:
+    else:
+        breached = []
+    if bad:  # said as well when a named pair is breached: both verdicts, one exit status
         print(f"NOT OPTIMAL: {len(bad)} of {len(report.examples)} stored answers ({', '.join(bad)})", file=sys.stderr)
+    if bad or breached:
         return 1
     print(f"all {len(report.examples)} stored answers are certified optimal")
     return 0
@@ -291,6 +313,18 @@ def _cmd_rig_defaults(func, defaults):
         # the cross-validation flags only mean something with --alpha auto on a fresh run
         args.cv_given = [flag for flag, v in (("--cv-folds", args.cv_folds), ("--cv-grid", args.cv_grid or None),
                                               ("--cv-candidates", args.cv_candidates)) if v is not None]
+        # options a resumed run takes from the run itself (history.json): given with --resume they are refused
+        args.run_given = [flag for flag, v in (("--ipopt", args.ipopt), ("--unobserved", args.unobserved),
+                                               ("--support", args.support), ("--virtual-weight", args.virtual_weight))
+                          if v is not None] + (["--virtual-mode"] if args.virtual_mode != "proportional" else [])
+        if args.support is not None and args.unobserved == "fit":
+            from ..errors import InputError
+
+            raise InputError(f"--support {args.support:g}: expected --unobserved transfer (the support threshold "
+                             "only decides which shapes keep their transfer), found --unobserved fit")
+        args.ipopt = defaults.ipopt if args.ipopt is None else args.ipopt
+        args.unobserved = defaults.unobserved if args.unobserved is None else args.unobserved
+        args.support = defaults.support if args.support is None else args.support
         args.cv_folds = defaults.cv_folds if args.cv_folds is None else args.cv_folds
         args.cv_candidates = defaults.cv_candidates if args.cv_candidates is None else args.cv_candidates
         args.alpha = alpha if args.alpha is None else args.alpha
@@ -357,13 +391,13 @@ def register(sub) -> None:
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")
-    p.add_argument("--ipopt", choices=IPOPT_MODES, default=defaults.ipopt,
+    p.add_argument("--ipopt", choices=IPOPT_MODES, default=None,
                    help="when the weight step also solves the CasADi/IPOPT model of eq. 5 (its answer seeds the "
                         f"certified solver, whose optimum is the answer either way; default {defaults.ipopt})")
-    p.add_argument("--unobserved", choices=UNOBSERVED_MODES, default=defaults.unobserved,
+    p.add_argument("--unobserved", choices=UNOBSERVED_MODES, default=None,
                    help="shapes whose rough weights stay below --support in every example: keep their deformation "
                         f"transfer (weights held at 0) or fit them like the others (default {defaults.unobserved})")
-    p.add_argument("--support", type=float, default=defaults.support,
+    p.add_argument("--support", type=float, default=None,
                    help=f"rough weight a shape needs in some example to count as observed (default {defaults.support:g})")
     p.add_argument("--cv-folds", type=int, default=None,
                    help=f"folds of --alpha auto (default {defaults.cv_folds})")

@@ -95,12 +95,26 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         message names the file and the line.
     """
     name = str(path)
-    raw = Path(path).read_bytes()
-    if b"\r" in raw:  # CRLF line ends as LF (the fast path then still applies), a lone CR as a blank
-        raw = raw.replace(b"\r\n", b"\n").replace(b"\r", b" ")
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise MeshError(f"{name}: expected a readable OBJ file, found {exc.strerror or exc}") from None
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise MeshError(f"{name}: expected an ASCII/UTF-8 OBJ file, found UTF-16 text (byte-order mark)")
+    if raw.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (Windows editors) is not data
+        raw = raw[3:]
+    if b"\r" in raw:  # CRLF line ends as LF (the fast path then still applies); a lone CR as a blank,
+        raw = raw.replace(b"\r\n", b"\n")  # or as the line end of a file with no LF at all (classic Mac)
+        raw = raw.replace(b"\r", b" " if b"\n" in raw else b"\n")
     fast = _read_plain(raw, name)
     if fast is not None:
         return fast
+    if b"#" in raw or b"\n " in raw or b"\n\t" in raw or raw[:1] in (b" ", b"\t"):
+        import re  # comments and indentation cut out (every line kept, so line numbers hold): the fast path
+        raw = re.sub(rb"(?m)^[ \t]+", b"", re.sub(rb"#[^\n]*", b"", raw))  # again, not 60 bytes per byte
+        fast = _read_plain(raw, name)
+        if fast is not None:
+            return fast
     return _read_general(raw, name)
 
 

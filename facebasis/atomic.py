@@ -1,5 +1,9 @@
 """Atomic outputs: a failed or interrupted run leaves no half-written file or folder behind.
 
+An output folder replaces an existing one only if that folder is empty or was written by this
+package (its :data:`OUTPUT_MARKER` file): ``--out`` naming a folder of the user's own files is
+refused, never emptied.
+
 Outputs get the permissions an ordinary ``open``/``mkdir`` would give under the process's umask
 (temporary files are created private, then opened up before they are renamed into place). Staging
 folders carry the writing process's id; one left behind by a process that no longer runs (killed
@@ -17,6 +21,9 @@ from pathlib import Path
 from typing import Iterator
 
 from .interrupt import deferred_interrupts
+
+#: the file every output folder carries, so that a later run with the same ``--out`` may replace it
+OUTPUT_MARKER = ".facebasis-output"
 
 
 def _read_umask() -> int:
@@ -107,6 +114,7 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
     blocker = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
     if blocker is not None:
         raise InputError(f"output folder {out}: expected a folder path, found the file {blocker} in it")
+    _check_replaceable(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale(out)
     stage = None
@@ -114,6 +122,7 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
         with deferred_interrupts():
             stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
             _open_up(stage, directory=True)
+            (stage / OUTPUT_MARKER).write_text("written by facebasis; a later run with this output folder replaces it\n")
         yield stage
         with deferred_interrupts():
             _swap_in(stage, out)
@@ -122,6 +131,20 @@ def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
             with deferred_interrupts():
                 shutil.rmtree(stage, ignore_errors=True)
         raise
+
+
+def _check_replaceable(out: Path) -> None:
+    """An existing folder is replaced only if it is empty or a previous output (its marker)."""
+    if not out.is_dir() or (out / OUTPUT_MARKER).is_file():
+        return
+    entries = sorted(p.name for p in out.iterdir())
+    if entries:
+        from .errors import InputError
+
+        shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+        raise InputError(f"output folder {out}: expected a new or empty folder or a previous facebasis output "
+                         f"(with its {OUTPUT_MARKER} file), found a folder holding {shown}; choose another "
+                         "output folder or remove this one (it would be replaced, its files deleted)")
 
 
 def _swap_in(stage: Path, out: Path) -> None:

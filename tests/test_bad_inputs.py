@@ -54,6 +54,7 @@ CASES = [
     ("transfer --template {d}/template --target {d}/target.obj --out ''", "--out: expected an output folder path, found an empty string"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/weights.json --out {d}/examples", "expected a folder apart from the inputs, found the input"),
     ("transfer --template {d}/template --target {d}/target.obj --out {d}/afile/out", "/afile/out: expected a folder path, found the file"),
+    ("transfer --template {d}/template --target {d}/target.obj --out {d}/userfolder", "/userfolder: expected a new or empty folder or a previous facebasis output (with its .facebasis-output file), found a folder holding notes.txt"),
     # rig options a resumed run takes from the run, contradictory options, inputs that would be dropped
     ("rig --resume {d}/template --examples {d}/examples --weights {d}/weights.json --ipopt never --out {o}", "--resume: expected the run's own schedule and pairs, found --ipopt"),
     ("rig --resume {d}/contactrun --examples {d}/examples --weights {d}/weights.json --out {o}", "expected a run made without --contact, found contact.json"),
@@ -139,6 +140,8 @@ def inputs(tmp_path_factory):
     (d / "list.json").write_text("[1, 2]")
     (d / "dupkeys.json").write_text('{"ex00": {"jawOpen": 1.0}, "ex00": {"jawOpen": 0.5}}')
     (d / "utf16.obj").write_bytes("\ufeffv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("utf-16"))
+    (d / "userfolder").mkdir()
+    (d / "userfolder" / "notes.txt").write_text("the user's own file")
     (d / "contactrun").mkdir()
     (d / "contactrun" / "contact.json").write_text("{}")
     (d / "empty.csv").write_text("")
@@ -212,3 +215,18 @@ def test_the_current_folder_and_those_above_are_never_replaced(inputs, tmp_path,
     assert code == 2 and ("current folder" in err or "folder above the current one" in err), err
     assert (here / "precious.txt").read_text() == "keep me"
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["here", "precious.txt", "work"]
+
+
+def test_an_output_folder_is_replaced_only_when_empty_or_written_by_facebasis(inputs, tmp_path, capsys):
+    d = inputs
+    base = ["transfer", "--template", str(d / "template"), "--target", str(d / "target.obj"), "--out"]
+    (tmp_path / "empty").mkdir()
+    assert main(base + [str(tmp_path / "empty")]) == 0  # an empty folder: used
+    assert (tmp_path / "empty" / ".facebasis-output").is_file() and (tmp_path / "empty" / "jawOpen.obj").is_file()
+    assert main(base + [str(tmp_path / "empty")]) == 0  # a previous output: replaced
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.tex").write_text("years of work")
+    capsys.readouterr()
+    assert main(base + [str(tmp_path / "mine")]) == 2
+    assert "found a folder holding thesis.tex" in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["thesis.tex"]

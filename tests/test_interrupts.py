@@ -91,8 +91,9 @@ def _interrupt_everywhere(make, run, check):
 
 
 def test_replacing_a_folder_interrupted_at_every_step_leaves_old_or_new_and_nothing_else(tmp_path):
-    old_files = {f"old{i}.txt": b"old" for i in range(18)}
-    new_files = {"new0.txt": b"new", "new1.txt": b"new", "new2.txt": b"new", "sub/x.txt": b"new"}
+    marker = {atomic.OUTPUT_MARKER: b"written by facebasis; a later run with this output folder replaces it\n"}
+    old_files = {f"old{i}.txt": b"old" for i in range(18)} | marker  # a previous output: replaceable
+    new_files = {"new0.txt": b"new", "new1.txt": b"new", "new2.txt": b"new", "sub/x.txt": b"new"} | marker
 
     def make(n):
         out = tmp_path / f"run{n}" / "out"

@@ -30,6 +30,8 @@ CASES = [
     ("transfer --template {d}/template --target {d}/target.obj --virtual-edges {d}/nope.json --out {o}", "expected a virtual-edges JSON file"),
     ("transfer --template {d}/template --target {d}/target.obj --virtual-edges --virtual-weight -1 --out {o}", "expected a positive number, found -1"),
     ("transfer --template {d}/template --target {d}/target.obj --virtual-mode sideways --out {o}", "invalid choice: 'sideways'"),
+    ("transfer --template {d}/template --target {d}/target.obj --virtual-weight 2 --out {o}", "--virtual-weight: expected --virtual-edges as well, found none"),
+    ("rig {rig} --virtual-mode gradient --virtual-weight 3", "--virtual-weight, --virtual-mode: expected --virtual-edges as well, found none"),
     # rig
     ("rig {rig} --alpha big", "--alpha: expected two numbers FIRST,LAST, found 'big'"),
     ("rig {rig} --alpha 1,2,3", "--alpha: expected two numbers FIRST,LAST, found '1,2,3'"),

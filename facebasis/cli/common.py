@@ -28,6 +28,21 @@ def virtual_edges_for(args, template):
     return ve
 
 
+def check_virtual_edge_args(args) -> None:
+    """``--virtual-weight`` / ``--virtual-mode`` shape the virtual-edge energy, so they are refused
+    without ``--virtual-edges`` (before any work) instead of being ignored; fills the mode's default.
+    A resumed run (``rig --resume``) refuses them itself."""
+    from ..contact.virtual_edges import VIRTUAL_MODES
+    from ..errors import InputError
+
+    given = [flag for flag, v in (("--virtual-weight", args.virtual_weight), ("--virtual-mode", args.virtual_mode))
+             if v is not None]
+    if given and args.virtual_edges is None and getattr(args, "resume", None) is None:
+        raise InputError(f"{', '.join(given)}: expected --virtual-edges as well, found none")
+    if args.virtual_mode is None:
+        args.virtual_mode = VIRTUAL_MODES[0]
+
+
 def add_virtual_edge_args(p: argparse.ArgumentParser) -> None:
     from ..contact.virtual_edges import DEFAULT_VIRTUAL_WEIGHT, VIRTUAL_MODES
 
@@ -36,7 +51,7 @@ def add_virtual_edge_args(p: argparse.ArgumentParser) -> None:
                         "edges are detected on the template neutral with the default parameters")
     p.add_argument("--virtual-weight", type=float, default=None,
                    help=f"weight of the virtual-edge energy (default {DEFAULT_VIRTUAL_WEIGHT:g})")
-    p.add_argument("--virtual-mode", choices=VIRTUAL_MODES, default=VIRTUAL_MODES[0],
+    p.add_argument("--virtual-mode", choices=VIRTUAL_MODES, default=None,
                    help="virtual-edge targets: the template's gap motion scaled down to a thinner target "
                         "gap (proportional, default) or the local gradient only (gradient)")
 

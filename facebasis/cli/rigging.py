@@ -7,7 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from .common import add_rig_folder_args, add_virtual_edge_args, describe_pairs, pair_of_floats, virtual_edges_for
+from .common import (add_rig_folder_args, add_virtual_edge_args, check_virtual_edge_args, describe_pairs,
+                     pair_of_floats, virtual_edges_for)
 
 
 def cmd_transfer(args) -> int:
@@ -19,6 +20,7 @@ def cmd_transfer(args) -> int:
 
     if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
         raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    check_virtual_edge_args(args)
     check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
@@ -316,7 +318,8 @@ def _cmd_rig_defaults(func, defaults):
         # options a resumed run takes from the run itself (history.json): given with --resume they are refused
         args.run_given = [flag for flag, v in (("--ipopt", args.ipopt), ("--unobserved", args.unobserved),
                                                ("--support", args.support), ("--virtual-weight", args.virtual_weight))
-                          if v is not None] + (["--virtual-mode"] if args.virtual_mode != "proportional" else [])
+                          if v is not None] + (["--virtual-mode"] if args.virtual_mode is not None else [])
+        check_virtual_edge_args(args)
         if args.support is not None and args.unobserved == "fit":
             from ..errors import InputError
 

@@ -84,11 +84,25 @@ def _rig_options(args):
     if args.cv_given and str(args.alpha).strip().lower() != "auto":
         raise InputError(f"{', '.join(args.cv_given)}: expected --alpha auto as well (cross-validation chooses "
                          f"alpha only then), found --alpha {args.alpha}")
-    return GenerationOptions(iterations=args.iterations, alpha=_alpha_option(args.alpha),
-                             lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
-                             virtual_mode=args.virtual_mode, ipopt=args.ipopt, unobserved=args.unobserved,
-                             support=args.support, cv_folds=args.cv_folds, cv_grid=grid,
-                             cv_candidates=args.cv_candidates)
+    try:
+        return GenerationOptions(iterations=args.iterations, alpha=_alpha_option(args.alpha),
+                                 lam=pair_of_floats(args.lam, "--lambda"), virtual_weight=args.virtual_weight,
+                                 virtual_mode=args.virtual_mode, ipopt=args.ipopt, unobserved=args.unobserved,
+                                 support=args.support, cv_folds=args.cv_folds, cv_grid=grid,
+                                 cv_candidates=args.cv_candidates)
+    except InputError as err:  # the options' own checks name their fields: say the flag the user typed
+        text = str(err)
+        field = text.split(":", 1)[0]
+        if field in _OPTION_FLAGS:
+            raise InputError(_OPTION_FLAGS[field] + text[len(field):]) from None
+        raise
+
+
+#: GenerationOptions fields -> the rig command's flags (for the options' own error messages)
+_OPTION_FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lambda": "--lambda", "lam": "--lambda",
+                 "support": "--support", "cv_folds": "--cv-folds", "cv_grid": "--cv-grid",
+                 "cv_candidates": "--cv-candidates", "virtual_weight": "--virtual-weight",
+                 "virtual_mode": "--virtual-mode", "ipopt": "--ipopt", "unobserved": "--unobserved"}
 
 
 def _progress(rec, total):

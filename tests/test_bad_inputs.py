@@ -26,6 +26,7 @@ CASES = [
     ("transfer --template {d}/template --target {d}/empty.obj --out {o}", "empty.obj: expected a mesh, found an empty file"),
     ("transfer --template {d}/template --target {d}/target.txt --out {o}", "expected a mesh file ending in .obj or .ply"),
     ("transfer --template {d}/template --neutral other.obj --target {d}/target.obj --out {o}", "expected the neutral 'other.obj'"),
+    ("transfer --template {d}/template --exclude 'identiy*' --exclude jawOpen --target {d}/target.obj --out {o}", "expected every --exclude pattern to match a mesh file, found none for 'identiy*' (mesh files there:"),
     ("transfer --template {d}/template --target {d}/target.obj --out {d}/afile", "expected a folder or a new path, found a file"),
     ("transfer --template {d}/template --target {d}/target.obj --virtual-edges {d}/nope.json --out {o}", "expected a virtual-edges JSON file"),
     ("transfer --template {d}/template --target {d}/target.obj --virtual-edges --virtual-weight -1 --out {o}", "expected a positive number, found -1"),

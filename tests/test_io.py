@@ -112,6 +112,11 @@ def test_rig_folder_loads_and_excludes(tmp_path):
     assert rig.names == ("shape0", "shape1") and rig.deltas[1, 7, 2] == pytest.approx(0.2)
     rig2 = load_rig_folder(tmp_path)
     assert "identity000" in rig2.names
+    (tmp_path / "._shape0.obj").write_bytes(b"\x00\x05\x16\x07 macOS resource fork")  # hidden: not a shape
+    assert load_rig_folder(tmp_path, exclude=["identity*"]).names == ("shape0", "shape1")
+    with pytest.raises(RigError, match=r"expected every --exclude pattern to match a mesh file, found none for "
+                                       r"'identiy\*' \(mesh files there: \['identity000.obj', 'neutral.obj'"):
+        load_rig_folder(tmp_path, exclude=["identity*", "identiy*"])
 
 
 def test_rig_folder_custom_neutral_and_write(tmp_path):

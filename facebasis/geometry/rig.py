@@ -3,7 +3,9 @@
 A rig folder is a directory of meshes sharing one topology: a neutral (``neutral.obj`` by default,
 or any name given, e.g. ICT-FaceKit's ``generic_neutral_mesh.obj``) and one mesh per blendshape,
 named by its file stem (``jawOpen.obj``). Files matching any ``exclude`` glob are ignored, so an
-ICT-FaceKit ``FaceXModel`` folder loads with ``exclude=("identity*",)``.
+ICT-FaceKit ``FaceXModel`` folder loads with ``exclude=("identity*",)``; a pattern matching no
+file is an error (a typo would keep what it meant to leave out). Hidden files (``.name``, e.g.
+macOS's ``._jawOpen.obj`` companions) are not meshes of the rig.
 """
 
 from __future__ import annotations
@@ -97,9 +99,11 @@ class Rig:
 
 
 def _mesh_files(folder: Path, exclude: Sequence[str]) -> list[Path]:
+    """Mesh files of ``folder`` by name, without hidden ones (``.name``: editors' and macOS's
+    ``._name`` companions) and those matching an ``exclude`` glob (on the name or the stem)."""
     files = []
     for p in sorted(folder.iterdir()):
-        if not p.is_file() or p.suffix.lower() not in MESH_SUFFIXES:
+        if not p.is_file() or p.suffix.lower() not in MESH_SUFFIXES or p.name.startswith("."):
             continue
         if any(fnmatch.fnmatch(p.name, g) or fnmatch.fnmatch(p.stem, g) for g in exclude):
             continue
@@ -134,6 +138,11 @@ def load_rig_folder(
             f"rig folder {folder}: expected the neutral '{neutral}', found no such file "
             f"(mesh files there: {found}); name it with --neutral"
         )
+    every = _mesh_files(folder, ())
+    unmatched = [g for g in exclude if not any(fnmatch.fnmatch(p.name, g) or fnmatch.fnmatch(p.stem, g) for p in every)]
+    if unmatched:  # a typo would otherwise keep the meshes the user meant to leave out
+        raise RigError(f"rig folder {folder}: expected every --exclude pattern to match a mesh file, found none for "
+                       f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})")
     V0, F0 = read_mesh(neutral_path, check_degenerate=True)
     names, deltas = [], []
     for p in _mesh_files(folder, exclude):

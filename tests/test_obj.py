@@ -321,3 +321,16 @@ def test_byte_order_mark_and_cr_only_line_ends(tmp_path):
         read_obj(tmp_path / "u16.obj")
     with pytest.raises(MeshError, match=r"expected a readable OBJ file, found"):
         read_obj(tmp_path)  # a folder
+
+
+def test_a_bad_number_or_a_bare_keyword_line_is_named_by_its_line(tmp_path):
+    """The fast reader leaves such files to the general one, which names the line."""
+    (tmp_path / "num.obj").write_bytes(b"v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(MeshError, match=r"num.obj: line 2: expected numbers in the vertex lines, found 'x'"):
+        read_obj(tmp_path / "num.obj")
+    (tmp_path / "ref.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 q\n")
+    with pytest.raises(MeshError, match=r"ref.obj: line 5: expected numbers in the face lines, found 'q'"):
+        read_obj(tmp_path / "ref.obj")
+    (tmp_path / "bare.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv\nf 1 2 3\n")
+    with pytest.raises(MeshError, match=r"bare.obj: line 4: expected a vertex 'v x y z', found 0 numbers"):
+        read_obj(tmp_path / "bare.obj")

@@ -50,8 +50,9 @@ def _tokens(buf: np.ndarray, line_of_byte: np.ndarray):
     return pos, line_of_byte[pos]
 
 
-def _parse_numbers(buf: np.ndarray, count: int, dtype, path: str, what: str) -> np.ndarray:
-    """Numbers of a whitespace-separated byte buffer that must hold exactly ``count`` of them."""
+def _parse_numbers(buf: np.ndarray, count: int, dtype, path: str, what: str, token_lines=None) -> np.ndarray:
+    """Numbers of a whitespace-separated byte buffer that must hold exactly ``count`` of them;
+    ``token_lines`` (count,): the file line (0-based) of each token, to name a bad one's line."""
     if count == 0:
         return np.zeros(0, dtype)
     import warnings
@@ -64,11 +65,12 @@ def _parse_numbers(buf: np.ndarray, count: int, dtype, path: str, what: str) -> 
     except (ValueError, DeprecationWarning):
         vals = np.zeros(0, dtype)
     if len(vals) != count:  # name the first token that is not a number
-        for token in text.split():
+        for i, token in enumerate(text.split()):
             try:
                 (int if dtype is np.int64 else float)(token)
             except ValueError:
-                raise MeshError(f"{path}: expected numbers in the {what} lines, found "
+                where = f"line {int(token_lines[i]) + 1}: " if token_lines is not None and i < len(token_lines) else ""
+                raise MeshError(f"{path}: {where}expected numbers in the {what} lines, found "
                                 f"{token.decode(errors='replace')!r}") from None
         raise MeshError(f"{path}: expected {count} numbers in the {what} lines, found {len(vals)}")
     return vals
@@ -147,6 +149,8 @@ def _read_plain(raw: bytes, name: str):
     if np.any((c0 == _SP) | (c0 == _TAB)):  # an indented line: leave it to the general reader
         return None
     sep = (c1 == _SP) | (c1 == _TAB)
+    if np.any(((c0 == ord("v")) | (c0 == ord("f"))) & (c1 == _NL)):
+        return None  # a bare 'v' or 'f' line: the general reader names it
     kind = np.where((c0 == ord("v")) & sep, _V, np.where((c0 == ord("f")) & sep, _F, _OTHER)).astype(np.int8)
     vtext, v_nl = _lines_of(raw, data, kind, starts, nl, _V)
     ftext, f_nl = _lines_of(raw, data, kind, starts, nl, _F)
@@ -176,10 +180,13 @@ def _read_plain(raw: bytes, name: str):
         k, refs = _count_tokens(fbuf, len(f_nl)), None
     if (len(v_nl) and per_v.min() < 3) or (len(f_nl) and k.min() < 3):
         return None  # the general reader names the line
-    if nums is None:
-        nums = _parse_numbers(vbuf, int(per_v.sum()), np.float64, name, "vertex")
-    if refs is None:
-        refs = _parse_numbers(fbuf, int(k.sum()), np.int64, name, "face")
+    try:
+        if nums is None:
+            nums = _parse_numbers(vbuf, int(per_v.sum()), np.float64, name, "vertex")
+        if refs is None:
+            refs = _parse_numbers(fbuf, int(k.sum()), np.int64, name, "face")
+    except MeshError:
+        return None  # the general reader names the line of the bad number
     if len(refs) and refs.min() <= 0:
         return None  # relative indices or a 0: the general reader resolves or names them
     if (per_v == 3).all():
@@ -260,7 +267,7 @@ def _read_general(raw: bytes, name: str) -> tuple[np.ndarray, np.ndarray]:
     if len(v_line_ids) and per_line.min() < 3:
         bad = v_line_ids[np.argmin(per_line)]
         raise MeshError(f"{name}: line {bad + 1}: expected a vertex 'v x y z', found {int(per_line.min())} numbers")
-    nums = _parse_numbers(vbuf, len(vpos), np.float64, name, "vertex")
+    nums = _parse_numbers(vbuf, len(vpos), np.float64, name, "vertex", vtok_line)
     first_tok = np.r_[0, np.cumsum(per_line)[:-1]]
     V = nums[first_tok[:, None] + np.arange(3)] if len(v_line_ids) else np.zeros((0, 3))
 
@@ -281,7 +288,7 @@ def _read_general(raw: bytes, name: str) -> tuple[np.ndarray, np.ndarray]:
         if empty_ref.any():
             line = int(ftok_line[np.argmax(empty_ref)])
             raise MeshError(f"{name}: line {line + 1}: expected a vertex index in every face reference, found none")
-    refs = _parse_numbers(fbuf, len(fpos), np.int64, name, "face")
+    refs = _parse_numbers(fbuf, len(fpos), np.int64, name, "face", ftok_line)
     f_line_ids = np.flatnonzero(kind == _F)
     k = np.bincount(np.searchsorted(f_line_ids, ftok_line), minlength=len(f_line_ids))
     if len(f_line_ids) and k.min() < 3:

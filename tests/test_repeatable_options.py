@@ -212,3 +212,23 @@ def test_help_is_plain_words():
         text = sub.format_help()
         assert "`" not in text and "seed 00" not in text and "DEFAULT_" not in text, name
         assert sub.description, name
+
+
+def test_a_value_repeated_within_a_repeatable_option_is_kept_once_and_said(tmp_path, capsys):
+    """``--contact-exclude jawOpen jawOpen`` and ``--cv-grid 0.1 0.1,0.1`` keep the value once (no
+    duplicate candidates, no doubled names) and say so."""
+    from facebasis.cli.rigging import _cv_grid
+
+    assert _cv_grid(["0.1", "0.1,0.3", "0.1"]) == (0.1, 0.3)
+    assert "note: --cv-grid 0.1 given more than once: used once" in capsys.readouterr().err
+    t = default_template()
+    write_rig_folder(tmp_path / "template", t)
+    write_mesh(tmp_path / "person.obj", default_person().neutral, default_person().faces)
+    code = main(["transfer", "--template", str(tmp_path / "template"), "--target", str(tmp_path / "person.obj"),
+                 "--out", str(tmp_path / "c"), "--contact", "--contact-exclude", "jawOpen", "jawOpen",
+                 "--contact-exclude", "mouthPucker"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "note: --contact-exclude jawOpen given more than once: used once" in captured.err
+    assert "(excluded: jawOpen, mouthPucker)" in captured.out
+    assert sorted(json.loads((tmp_path / "c" / "contact.json").read_text())["excluded"]) == ["jawOpen", "mouthPucker"]

@@ -20,6 +20,7 @@ def cmd_transfer(args) -> int:
 
     if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
         raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
     check_virtual_edge_args(args)
     check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
@@ -73,7 +74,16 @@ def _cv_grid(values) -> tuple[float, ...]:
             if not (a > 0 and a < float("inf")):
                 raise InputError(f"--cv-grid: expected final alphas > 0, found {part!r}")
             out.append(a)
-    return tuple(out)
+    return tuple(_once(out, "--cv-grid"))
+
+
+def _once(values, flag: str) -> list:
+    """``values`` in order with repeats dropped, saying so (a repeated flag value is kept once)."""
+    out = list(dict.fromkeys(values))
+    if len(out) < len(values):
+        repeated = sorted({str(v) for v in values if values.count(v) > 1})
+        print(f"note: {flag} {', '.join(repeated)} given more than once: used once", file=sys.stderr)
+    return out
 
 
 def _rig_options(args):
@@ -148,6 +158,7 @@ def cmd_rig(args) -> int:
     # everything is validated before any solving starts
     if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
         raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
     options = _rig_options(args)
     check_output_folder(args.out, (args.template, args.target, args.examples, args.weights))
     template = load_rig_folder(args.template, args.neutral, args.exclude)

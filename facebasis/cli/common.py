@@ -39,6 +39,9 @@ def check_virtual_edge_args(args) -> None:
              if v is not None]
     if given and args.virtual_edges is None and getattr(args, "resume", None) is None:
         raise InputError(f"{', '.join(given)}: expected --virtual-edges as well, found none")
+    w = args.virtual_weight
+    if w is not None and not (0.0 < w < float("inf")):  # before the meshes are read and the edges detected
+        raise InputError(f"--virtual-weight: expected a positive number, found {w:g}")
     if args.virtual_mode is None:
         args.virtual_mode = VIRTUAL_MODES[0]
 

@@ -25,12 +25,11 @@ def cmd_transfer(args) -> int:
     check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
-    if args.contact_exclude:
-        template.index(args.contact_exclude, what="--contact-exclude")
-    if args.contact:
-        from ..contact.exact import check_size
+    if args.contact:  # names, size and the target's own intersections, before any solving (as rig does)
+        from ..contact.exact import check_contact_inputs
 
-        check_size(template.n_vertices, what="--contact")
+        check_contact_inputs(template, target, args.contact_exclude, args.contact_allow_target_pairs,
+                             what="--contact", exclude_what="--contact-exclude", target_what=str(args.target))
     ve = virtual_edges_for(args, template)
     t0 = time.perf_counter()
     dt = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,

@@ -82,3 +82,22 @@ def test_resume_errors_on_inputs(finished, tmp_path, capsys):
     assert main(["rig", "--resume", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 2
     assert "expected inputs.json (written by `facebasis rig`), found no such file" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_run_made_with_virtual_edges_is_resumed_only_with_them(finished, capsys):
+    """inputs.json records whether the virtual-edge energy shaped the run; resuming without it would
+    silently drop that energy, so it is refused until --virtual-edges (and --template) are given."""
+    root = finished
+    assert json.loads((root / "run" / "inputs.json").read_text())["sources"]["virtual_edges"] is False
+    code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
+                 "--examples", str(root / "first"), "--weights", str(root / "first.json"), "--virtual-edges",
+                 "--out", str(root / "ve_run"), "--iterations", "2"])
+    assert code == 0
+    assert json.loads((root / "ve_run" / "inputs.json").read_text())["sources"]["virtual_edges"] is True
+    capsys.readouterr()
+    assert main(["rig", "--resume", str(root / "ve_run"), "--out", str(root / "ve_bad")]) == 2
+    assert "as the run was made with virtual edges, found none" in capsys.readouterr().err
+    assert not (root / "ve_bad").exists()
+    assert main(["rig", "--resume", str(root / "ve_run"), "--virtual-edges", "--template", str(root / "template"),
+                 "--out", str(root / "ve_again")]) == 0
+    assert json.loads((root / "ve_again" / "inputs.json").read_text())["sources"]["virtual_edges"] is True

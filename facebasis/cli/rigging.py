@@ -262,6 +262,9 @@ def _cmd_rig_resume(args) -> int:
         inputs, ex_dirs, w_files = read_inputs(args.resume)  # the run's own inputs must survive too
         src = inputs.get("sources") or {}
         recorded = [*ex_dirs, *w_files, *(Path(args.resume) / src[k] for k in ("template", "target") if k in src)]
+        if src.get("virtual_edges") is True and args.virtual_edges is None:
+            raise InputError(f"--resume {args.resume}: expected --virtual-edges (and --template) as the run was made "
+                             "with virtual edges, found none (the resumed run would drop their energy)")
     check_output_folder(args.out, (args.resume, args.template, args.target, args.examples, args.weights, *recorded),
                         allow=(args.resume,))
     ve = None

@@ -52,6 +52,8 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
         "threshold": options.missing_threshold,
         "relative_residual": dict(zip(names, map(float, result.residuals))),
         "missing": list(result.missing)})
+    # whether the virtual-edge energy shaped the run: a resumed run must be given it again
+    sources = dict(sources or {}, virtual_edges=getattr(problem, "virtual_edges", None) is not None)
     write_inputs(folder, examples_dir, weights_file, problem.exclusive, result.final_step[1], relative_to,
                  unobserved=getattr(result, "unobserved", ()), sources=sources)
     cv = getattr(result, "crossval", None)

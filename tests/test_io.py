@@ -171,3 +171,9 @@ def test_rig_object_errors():
     rig = Rig(V, F, ("a", "b"), np.zeros((2, 16, 3)))
     with pytest.raises(RigError, match=r"weights: expected 2 per expression, found 3"):
         rig.evaluate(np.zeros(3))
+
+
+def test_a_folder_named_like_a_mesh_is_called_a_folder(tmp_path):
+    (tmp_path / "scan.obj").mkdir()
+    with pytest.raises(MeshError, match=r"scan.obj: expected a mesh file, found a folder"):
+        read_mesh(tmp_path / "scan.obj")

@@ -50,7 +50,7 @@ def read_mesh(path: str | os.PathLike, *, check_degenerate: bool = False) -> tup
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{name}: expected a mesh file ending in .obj or .ply, found '{path.suffix}'")
     if not path.is_file():
-        raise MeshError(f"{name}: expected a mesh file, found no such file")
+        raise MeshError(f"{name}: expected a mesh file, found {'a folder' if path.is_dir() else 'no such file'}")
     if path.stat().st_size == 0:
         raise MeshError(f"{name}: expected a mesh, found an empty file")
     if path.suffix.lower() == ".obj":

@@ -154,6 +154,16 @@ def test_edges_json_round_trip_and_errors(tmp_path):
     (tmp_path / "self.json").write_text(json.dumps({"n_vertices": 4, "edges": [[1, 1]]}))
     with pytest.raises(InputError, match="expected edges between two different vertices"):
         VirtualEdges.read(tmp_path / "self.json")
+    for name, body, message in (
+            ("float.json", {"n_vertices": 4, "edges": [[0.5, 2]]}, r"edges as integer pairs \[\[u, v\], ...\], found float64"),
+            ("flat.json", {"n_vertices": 4, "edges": [0, 1, 2, 3]}, r"found int64 values of shape \(4,\)"),
+            ("twice.json", {"n_vertices": 4, "edges": [[0, 2], [1, 3], [2, 0]]},
+             r"expected each edge once, found 1 listed more than once \(e.g. \[0, 2\]\)"),
+            ("lengths.json", {"n_vertices": 4, "edges": [[0, 2], [1, 3]], "euclidean": [1.0]},
+             r"'euclidean' with one value per edge \(2\), found 1")):
+        (tmp_path / name).write_text(json.dumps(body))
+        with pytest.raises(InputError, match=message):
+            VirtualEdges.read(tmp_path / name)
     (tmp_path / "junk.json").write_text("[1, 2")
     with pytest.raises(InputError, match="expected a virtual-edges JSON"):
         VirtualEdges.read(tmp_path / "junk.json")

@@ -137,8 +137,14 @@ class VirtualEdges:
         path = Path(path)
         d = read_json(path, "a virtual-edges JSON file")
         try:
-            E = np.asarray(d["edges"], dtype=np.int64).reshape(-1, 2)
+            raw = np.asarray(d["edges"])
+            if raw.size and (raw.ndim != 2 or raw.shape[1] != 2 or raw.dtype.kind not in "iu"):
+                raise ValueError(f"edges as integer pairs [[u, v], ...], found {raw.dtype} values of shape {raw.shape}")
+            E = raw.astype(np.int64).reshape(-1, 2)
             n = int(d["n_vertices"])
+            for key in ("euclidean", "geodesic"):
+                if key in d and len(d[key]) != len(E):
+                    raise ValueError(f"'{key}' with one value per edge ({len(E)}), found {len(d[key])}")
             ve = VirtualEdges(E, np.asarray(d.get("euclidean", [np.nan] * len(E)), float),
                               np.asarray([np.inf if g is None else g for g in d.get("geodesic", [None] * len(E))], float),
                               n, float(d.get("cap", np.nan)), float(d.get("ratio", np.nan)),
@@ -153,6 +159,11 @@ class VirtualEdges:
             raise InputError(f"{path}: expected vertex indices in [0, {n}), found {int(E.min())}..{int(E.max())}")
         if len(E) and np.any(E[:, 0] == E[:, 1]):
             raise InputError(f"{path}: expected edges between two different vertices, found {E[E[:, 0] == E[:, 1]][0].tolist()}")
+        key = np.sort(E, axis=1)
+        uniq, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+        if len(uniq) < len(E):  # an edge listed twice would count twice in the energy
+            raise InputError(f"{path}: expected each edge once, found {int((counts > 1).sum())} listed more than once "
+                             f"(e.g. {uniq[np.argmax(counts > 1)].tolist()})")
         return ve
 
 

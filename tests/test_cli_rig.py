@@ -198,3 +198,17 @@ def test_verify_flags_a_weight_on_a_shape_the_run_held_at_zero(rig_inputs, capsy
     (bad / "weights.json").write_text(json.dumps(w))
     assert main(["verify", str(bad)]) == 1
     assert f"NOT OPTIMAL: 1 of {len(w)} stored answers ({first})" in capsys.readouterr().err
+
+
+def test_verify_names_a_shape_file_missing_from_the_run(rig_inputs, capsys):
+    import shutil
+
+    root, pp = rig_inputs
+    run = _run_rig(root, "verified_missing")
+    broken = root / "missing_shape"
+    shutil.copytree(run, broken)
+    used = sorted({s for row in json.loads((broken / "weights.json").read_text()).values() for s in row})
+    (broken / f"{used[0]}.obj").unlink()
+    capsys.readouterr()
+    assert main(["verify", str(broken)]) == 2
+    assert f"expected a mesh for every shape its weights.json names, found none for ['{used[0]}']" in capsys.readouterr().err

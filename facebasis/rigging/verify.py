@@ -174,6 +174,12 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     inputs, example_dirs, weight_files = read_inputs(run)
     exclusive, lam = inputs["exclusive"], inputs["final_lambda"]
     rig = load_rig_folder(run, "neutral.obj")
+    stored_names = {s for row in read_json(run / "weights.json", "the run's weights JSON").values()
+                    if isinstance(row, dict) for s in row}
+    missing = sorted(stored_names - set(rig.names))
+    if missing:  # a shape file removed from the run, not a fault of the inputs
+        raise InputError(f"{run}: expected a mesh for every shape its weights.json names, found none for {missing} "
+                         f"(missing {', '.join(m + '.obj' for m in missing[:3])}?)")
     names, T, prior = load_training(example_dirs, weight_files, rig)
     stored = load_weights(run / "weights.json", names, rig.names)
     held = [str(s) for s in inputs.get("unobserved", [])]

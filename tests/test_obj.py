@@ -334,3 +334,10 @@ def test_a_bad_number_or_a_bare_keyword_line_is_named_by_its_line(tmp_path):
     (tmp_path / "bare.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv\nf 1 2 3\n")
     with pytest.raises(MeshError, match=r"bare.obj: line 4: expected a vertex 'v x y z', found 0 numbers"):
         read_obj(tmp_path / "bare.obj")
+
+
+def test_an_index_too_large_for_int64_is_said_so(tmp_path):
+    (tmp_path / "huge.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n")
+    with pytest.raises(MeshError, match=r"line 4: expected an index of one of the 3 vertices defined, found an "
+                                        r"index beyond 2\^63"):
+        read_obj(tmp_path / "huge.obj")

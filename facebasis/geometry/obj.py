@@ -303,8 +303,11 @@ def _read_general(raw: bytes, name: str) -> tuple[np.ndarray, np.ndarray]:
     bad = (idx < 0) | (idx >= np.where(refs > 0, len(V), v_before))
     if bad.any():
         j = int(np.argmax(bad))
+        r = int(refs[j])
+        shown = (str(r) if abs(r) < np.iinfo(np.int64).max  # np.fromstring saturates: say what was meant
+                 else "an index beyond 2^63" if r > 0 else "an index below -2^63")
         raise MeshError(f"{name}: line {int(ftok_line[j]) + 1}: expected an index of one of the "
-                        f"{int(v_before[j]) if refs[j] < 0 else len(V)} vertices defined, found {int(refs[j])}")
+                        f"{int(v_before[j]) if refs[j] < 0 else len(V)} vertices defined, found {shown}")
     F = _triangulate(idx, k)
     return np.ascontiguousarray(V, dtype=np.float64), F
 

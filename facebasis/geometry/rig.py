@@ -98,17 +98,17 @@ class Rig:
         return Rig(neutral, self.faces, self.names, deltas, source or self.source)
 
 
+def _matches(p: Path, glob: str) -> bool:
+    """An ``exclude`` glob matches a file by its name or its stem."""
+    return fnmatch.fnmatch(p.name, glob) or fnmatch.fnmatch(p.stem, glob)
+
+
 def _mesh_files(folder: Path, exclude: Sequence[str]) -> list[Path]:
     """Mesh files of ``folder`` by name, without hidden ones (``.name``: editors' and macOS's
-    ``._name`` companions) and those matching an ``exclude`` glob (on the name or the stem)."""
-    files = []
-    for p in sorted(folder.iterdir()):
-        if not p.is_file() or p.suffix.lower() not in MESH_SUFFIXES or p.name.startswith("."):
-            continue
-        if any(fnmatch.fnmatch(p.name, g) or fnmatch.fnmatch(p.stem, g) for g in exclude):
-            continue
-        files.append(p)
-    return files
+    ``._name`` companions) and those matching an ``exclude`` glob."""
+    return [p for p in sorted(folder.iterdir())
+            if p.is_file() and p.suffix.lower() in MESH_SUFFIXES and not p.name.startswith(".")
+            and not any(_matches(p, g) for g in exclude)]
 
 
 def load_rig_folder(
@@ -132,21 +132,20 @@ def load_rig_folder(
     if not folder.is_dir():
         raise RigError(f"rig folder {folder}: expected a folder of meshes, found no such folder")
     neutral_path = folder / neutral
+    every = _mesh_files(folder, ())  # the folder listed once
     if not neutral_path.is_file():
-        found = [p.name for p in _mesh_files(folder, ())][:10]
         raise RigError(
             f"rig folder {folder}: expected the neutral '{neutral}', found no such file "
-            f"(mesh files there: {found}); name it with --neutral"
+            f"(mesh files there: {[p.name for p in every][:10]}); name it with --neutral"
         )
-    every = _mesh_files(folder, ())
-    unmatched = [g for g in exclude if not any(fnmatch.fnmatch(p.name, g) or fnmatch.fnmatch(p.stem, g) for p in every)]
+    unmatched = [g for g in exclude if not any(_matches(p, g) for p in every)]
     if unmatched:  # a typo would otherwise keep the meshes the user meant to leave out
         raise RigError(f"rig folder {folder}: expected every --exclude pattern to match a mesh file, found none for "
                        f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})")
     V0, F0 = read_mesh(neutral_path, check_degenerate=True)
     names, deltas = [], []
-    for p in _mesh_files(folder, exclude):
-        if p.resolve() == neutral_path.resolve():
+    for p in every:
+        if any(_matches(p, g) for g in exclude) or p.resolve() == neutral_path.resolve():
             continue
         V = read_mesh_like(p, len(V0), F0, str(neutral_path))
         names.append(p.stem)

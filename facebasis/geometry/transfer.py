@@ -43,8 +43,6 @@ def template_motion(rig: Rig) -> np.ndarray:
     """Largest displacement of every vertex over all shapes, (n,); the squares are formed for a
     group of shapes at a time (the same values, without a (k, n, 3) temporary)."""
     step = SHAPES_PER_SOLVE
-    if rig.n_shapes <= step:
-        return np.sqrt((rig.deltas ** 2).sum(-1).max(0))
     sq = (rig.deltas[:step] ** 2).sum(-1).max(0)
     for s in range(step, rig.n_shapes, step):
         np.maximum(sq, (rig.deltas[s:s + step] ** 2).sum(-1).max(0), out=sq)

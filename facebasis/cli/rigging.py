@@ -16,11 +16,7 @@ def cmd_transfer(args) -> int:
     from ..geometry.rig import load_rig_folder, load_target_neutral, write_shapes
     from ..geometry.transfer import DeformationTransfer
 
-    from ..errors import InputError
-
-    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
-        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
-    args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
+    _check_contact_flags(args)
     check_virtual_edge_args(args)
     check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
@@ -74,6 +70,15 @@ def _cv_grid(values) -> tuple[float, ...]:
                 raise InputError(f"--cv-grid: expected final alphas > 0, found {part!r}")
             out.append(a)
     return tuple(_once(out, "--cv-grid"))
+
+
+def _check_contact_flags(args) -> None:
+    """The contact flags of transfer and rig: the others need ``--contact``; names given twice kept once."""
+    from ..errors import InputError
+
+    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
+        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
 
 
 def _once(values, flag: str) -> list:
@@ -155,9 +160,7 @@ def cmd_rig(args) -> int:
     if absent:
         raise InputError(f"rig: expected {', '.join(absent)} (or --resume RUN_DIR), found none")
     # everything is validated before any solving starts
-    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
-        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
-    args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
+    _check_contact_flags(args)
     options = _rig_options(args)
     check_output_folder(args.out, (args.template, args.target, args.examples, args.weights))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
@@ -256,7 +259,7 @@ def _cmd_rig_resume(args) -> int:
         raise InputError(f"--resume: expected the run's own schedule and pairs, found {', '.join(given)} "
                          "(start a new run to change them)")
     recorded = []
-    if args.resume is not None and (Path(args.resume) / "inputs.json").is_file():
+    if (Path(args.resume) / "inputs.json").is_file():
         from ..rigging.verify import read_inputs
 
         inputs, ex_dirs, w_files = read_inputs(args.resume)  # the run's own inputs must survive too

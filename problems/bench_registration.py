@@ -150,22 +150,34 @@ def _timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t0, time.process_time() - c0, os.getloadavg()[0]
 
 
-def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", "identity"),
-        landmarks=(False, True), log=print):
-    """Rows of the benchmark (module docstring): per seed, template, landmark use and scan."""
-    from facebasis.geometry.nricp import NonRigidICP
-    from problems.ict import _load, ict_random_identity, ict_regions
+def _ict_setup():
+    """The ICT data, its faces F and neutral T, the face region's vertices, the head-and-neck mask a
+    scan keeps and the head's vertices: what every part of this benchmark starts from."""
+    from problems.ict import _load, ict_regions
 
     d = _load()
     F = d["faces"].astype(np.int64)
     T = d["neutral"].astype(np.float64)
-    names = [str(s) for s in d["expression_names"]]
-    lm68 = d["landmarks68"].astype(np.int64)
     reg = ict_regions()
-    face = np.arange(*reg["face"])
     keep = np.zeros(len(T), bool)
     keep[: reg["head_neck"][1]] = True
-    head = np.arange(*reg["head_neck"])
+    return d, F, T, np.arange(*reg["face"]), keep, np.arange(*reg["head_neck"])
+
+
+def _ears(B0, head):
+    """The leftmost and rightmost head vertices of ``B0`` (2, 3): where a scanner's view ends."""
+    return np.stack([B0[head[np.argmax(B0[head, 0])]], B0[head[np.argmin(B0[head, 0])]]])
+
+
+def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", "identity"),
+        landmarks=(False, True), log=print):
+    """Rows of the benchmark (module docstring): per seed, template, landmark use and scan."""
+    from facebasis.geometry.nricp import NonRigidICP
+    from problems.ict import ict_random_identity
+
+    d, F, T, face, keep, head = _ict_setup()
+    names = [str(s) for s in d["expression_names"]]
+    lm68 = d["landmarks68"].astype(np.int64)
     normals_of = NonRigidICP(F, len(T)).vertex_normals
     rows = []
 
@@ -184,7 +196,7 @@ def run(seeds=(0,), n_expr: int = 6, quick: bool = False, templates=("generic", 
     for seed in seeds:
         rng = np.random.default_rng(1000 + seed)
         _, B0 = ict_random_identity(seed)
-        ears = np.stack([B0[head[np.argmax(B0[head, 0])]], B0[head[np.argmin(B0[head, 0])]]])
+        ears = _ears(B0, head)
         shapes = [("neutral", B0)]
         for nm in EXPRESSIONS[:n_expr]:
             shapes.append((nm, B0 + d["expression_deltas"][names.index(nm)].astype(np.float64)))
@@ -264,20 +276,12 @@ def rig_comparison(seed: int = 0, n_train: int = 12, log=print) -> dict:
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
     from problems.generation import ict_person_problem
-    from problems.ict import _load, ict_regions
 
-    d = _load()
-    F = d["faces"].astype(np.int64)
-    T = d["neutral"].astype(np.float64)
-    reg = ict_regions()
-    face = np.arange(*reg["face"])
-    keep = np.zeros(len(T), bool)
-    keep[: reg["head_neck"][1]] = True
-    head = np.arange(*reg["head_neck"])
+    _, F, T, face, keep, head = _ict_setup()
     pp = ict_person_problem(seed=seed, n_train=n_train)
     p = pp.problem
     B0 = p.target_neutral
-    ears = np.stack([B0[head[np.argmax(B0[head, 0])]], B0[head[np.argmin(B0[head, 0])]]])
+    ears = _ears(B0, head)
     rng = np.random.default_rng(2000 + seed)
     reg_obj = Registration(T, F, name="ICT neutral")
     out, secs = [], []

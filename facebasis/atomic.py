@@ -1,29 +1,54 @@
-"""Atomic outputs: a failed or interrupted run leaves no half-written file or folder behind.
+"""Outputs that never destroy what a user owns: one rule for every command, and atomic writes.
 
-An output folder replaces an existing one only if that folder is empty or was written by this
-package (its :data:`OUTPUT_MARKER` file): ``--out`` naming a folder of the user's own files is
-refused, never emptied.
+The rule (:func:`check_output`, called by every command before any work, through
+:mod:`facebasis.cli.outputs`):
 
-Outputs get the permissions an ordinary ``open``/``mkdir`` would give under the process's umask
-(temporary files are created private, then opened up before they are renamed into place). Staging
-folders carry the writing process's id; one left behind by a process that no longer runs (killed
-with SIGKILL, power loss) is removed the next time the same output is written.
+* an output is never an input, never holds an input, and never lies inside an input folder
+  (unless that folder is itself a facebasis output, e.g. ``RUN_DIR/report``);
+* an output is never the current folder or one above it, never a symbolic link, never a path
+  through a file;
+* an existing output *folder* is replaced only if it is empty or a previous facebasis output (its
+  :data:`OUTPUT_MARKER` file); an existing output *file* only if facebasis wrote it (its format's
+  signature: a glTF ``asset.generator``, a JSON ``format``/``generator`` key, a PNG/PDF software
+  tag, a results table's header, ...: :func:`written_by_facebasis`).
+
+Atomic writes: every output is made in a *run folder* beside it, ``.NAME.facebasis-XXXX``, which
+belongs to its run by a lock held for the run's lifetime (``flock``; released by the kernel when the
+process dies however it dies, across PID namespaces and containers that share the folder) and by a
+unique token written inside it. The new output is built in ``RUN/new``; the swap moves an existing
+output to ``RUN/old``, renames ``RUN/new`` into place, then removes the run folder. A run folder
+whose lock is free belongs to a dead run and is recovered by the next run writing the same output
+(:func:`recover`): if the kill fell between the two renames, the old output is *restored* from
+``RUN/old``; a half-built ``RUN/new`` is deleted; an old output is never deleted unless the new one
+is in place.
+
+Outputs get the permissions an ordinary ``open``/``mkdir`` would give under the process's umask.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import json
 import os
+import re
+import secrets
 import shutil
 import tempfile
+import time
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterable, Iterator
 
 from .interrupt import deferred_interrupts
 
 #: the file every output folder carries, so that a later run with the same ``--out`` may replace it
 OUTPUT_MARKER = ".facebasis-output"
+#: run folders beside an output: ``.NAME.facebasis-XXXX``
+RUN_INFIX = ".facebasis-"
+_LOCK, _TOKEN, _NEW, _OLD = "lock", "token", "new", "old"
+#: a run folder without a lock file (its run died between mkdir and lock) is stale after this long
+_LOCKLESS_GRACE_SECONDS = 60.0
 
 
 def _read_umask() -> int:
@@ -35,159 +60,373 @@ def _read_umask() -> int:
 #: the process's umask, read once at import (reading it means setting it, which is not thread-safe)
 _UMASK = _read_umask()
 
+#: staging folders of the runs in this process (files written inside them need no run folder)
+_ACTIVE_STAGES: set[Path] = set()
+
 
 def _open_up(path: Path, directory: bool) -> None:
     """Give a private temporary file or folder the mode ``open``/``mkdir`` would have given it."""
     os.chmod(path, (0o777 if directory else 0o666) & ~_UMASK)
 
 
-def _alive(pid: int) -> bool:
+def _input_error(text: str):
+    from .errors import InputError
+
+    return InputError(text)
+
+
+# ----------------------------------------------------------------------------------------------
+# what facebasis wrote
+
+#: byte patterns that mark a file as written by facebasis, by suffix (searched in its first 64 KiB;
+#: for GLB in its JSON chunk)
+_SIGNATURES: dict[str, tuple[bytes, ...]] = {
+    ".json": (b'"format": "facebasis', b'"generator": "facebasis', b'"format":"facebasis', b'"generator":"facebasis'),
+    ".gltf": (b'"generator": "facebasis', b'"generator":"facebasis'),
+    ".glb": (b'"generator":"facebasis', b'"generator": "facebasis'),
+    ".png": (b"tEXtSoftware\x00facebasis",),
+    ".pdf": (b"(facebasis",),
+    ".svg": (b"facebasis",),
+    ".pts": (b"// facebasis", b"generator: facebasis"),
+}
+
+#: first lines of the CSV tables facebasis writes (registered by their writers)
+CSV_HEADERS: set[bytes] = set()
+
+
+def written_by_facebasis(path: str | os.PathLike) -> bool:
+    """Whether the existing file ``path`` carries the signature facebasis writes into its format
+    (so a later run may replace it). Reads at most 64 KiB (a GLB's JSON chunk: at most 16 MiB)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(path, "rb") as fh:
+            head = fh.read(65536)
+            if suffix == ".glb" and head[:4] == b"glTF" and len(head) >= 20:
+                n = int.from_bytes(head[12:16], "little")
+                if n <= 16 * 2 ** 20:
+                    fh.seek(20)
+                    head = fh.read(n)
+    except OSError:
         return False
-    except PermissionError:  # pragma: no cover - someone else's process
-        return True
-    return True
+    if suffix == ".csv":
+        first = head.split(b"\n", 1)[0].rstrip(b"\r")
+        return first in CSV_HEADERS
+    return any(sig in head for sig in _SIGNATURES.get(suffix, ()))
 
 
-def _remove_stale(out: Path) -> None:
-    """Staging or swapped-out siblings of ``out`` left by processes that no longer run."""
-    for kind in ("partial", "old"):
-        for p in out.parent.glob(f".{out.name}.{kind}-*"):
-            try:
-                pid = int(p.name[len(f".{out.name}.{kind}-"):].split("-")[0])
-            except ValueError:
-                continue
-            if pid != os.getpid() and not _alive(pid):
-                shutil.rmtree(p, ignore_errors=True)
+# ----------------------------------------------------------------------------------------------
+# the rule
+
+def _is_within(path: Path, folder: Path) -> bool:
+    return path != folder and folder in path.parents
+
+
+def _resolved(p) -> Path:
+    return Path(os.path.abspath(os.fspath(p))).resolve()
+
+
+def _describe_entries(folder: Path) -> str:
+    entries = sorted(p.name for p in folder.iterdir())
+    return ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+
+
+def check_output(out, inputs: Iterable = (), *, kind: str = "folder", what: str = "--out",
+                 allow: Iterable = ()) -> Path:
+    """Refuse an output whose writing would change what the user owns; returns its absolute path.
+
+    Parameters
+    ----------
+    out : path
+        The output folder (``kind="folder"``) or file (``kind="file"``).
+    inputs : iterable of paths
+        Everything the command reads (``None`` entries are skipped).
+    kind : {"folder", "file"}
+    what : str
+        How the error names the output (the option the user typed).
+    allow : iterable of paths
+        Inputs the output may replace (``rig --resume RUN --out RUN`` updates a run in place).
+
+    Raises
+    ------
+    InputError
+        Naming the output, what was expected and what was found.
+    """
+    if kind not in ("folder", "file"):
+        raise ValueError(f"kind: expected 'folder' or 'file', found {kind!r}")
+    noun = "output folder" if kind == "folder" else "output file"
+    if not str(out).strip():
+        raise _input_error(f"{what}: expected an {noun} path, found an empty string"
+                           + (" (it would replace the current folder)" if kind == "folder" else ""))
+    given = Path(os.path.abspath(os.fspath(out)))
+    if os.path.islink(given):
+        target = os.readlink(given)
+        raise _input_error(f"{what} {out}: expected a new path or a previous facebasis {noun[7:]}, found a symbolic "
+                           f"link (to {target}); name the real path instead")
+    blocker = next((p for p in given.parents if os.path.lexists(p) and not p.is_dir()), None)
+    if blocker is not None:
+        raise _input_error(f"{what} {out}: expected a folder path, found "
+                           f"{'the file' if blocker.exists() else 'a broken link or unreadable entry'} {blocker} in it")
+    resolved = given.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise _input_error(f"{what} {out}: expected a new {noun[7:]} or a previous output, found "
+                           f"{'the current folder' if resolved == cwd else 'a folder above the current one'} "
+                           "(replacing it would delete everything in it)")
+    allowed = {_resolved(a) for a in allow if a is not None}
+    for p in inputs:
+        if p is None or not str(p).strip():
+            continue
+        q = _resolved(p)
+        if q in allowed:
+            continue
+        same = resolved == q or (resolved.exists() and q.exists() and _samefile(resolved, q))
+        if same:
+            raise _input_error(f"{what} {out}: expected an output apart from the inputs, found the input {p} itself "
+                               "(writing it would destroy the input)")
+        if _is_within(q, resolved):
+            raise _input_error(f"{what} {out}: expected an output apart from the inputs, found a folder holding the "
+                               f"input {p} (replacing it would delete the input)")
+        if q.is_dir() and _is_within(resolved, q) and not _is_output(q):
+            raise _input_error(f"{what} {out}: expected an output outside the input folders, found a path inside the "
+                               f"input folder {p} (a command never writes into a folder of the user's files)")
+    if kind == "folder":
+        if resolved.exists() and not resolved.is_dir():
+            raise _input_error(f"{what} {out}: expected a folder or a new path, found a file")
+        if resolved.is_dir() and not (resolved / OUTPUT_MARKER).is_file() and any(resolved.iterdir()):
+            raise _input_error(f"{what} {out}: expected a new or empty folder or a previous facebasis output (with its "
+                               f"{OUTPUT_MARKER} file), found a folder holding {_describe_entries(resolved)}; choose "
+                               "another output folder or remove this one (it would be replaced, its files deleted)")
+    else:
+        if resolved.is_dir():
+            raise _input_error(f"{what} {out}: expected a file name, found a folder")
+        if not resolved.parent.is_dir():
+            raise _input_error(f"{what} {out}: expected an existing folder to write into, found no folder "
+                               f"{resolved.parent}")
+        if resolved.exists() and not written_by_facebasis(resolved):
+            raise _input_error(f"{what} {out}: expected a new file or one facebasis wrote, found an existing file "
+                               "without facebasis's signature; choose another name or remove it (it would be "
+                               "overwritten)")
+    return resolved
+
+
+def _is_output(folder: Path) -> bool:
+    """Whether ``folder`` is, or lies inside, a facebasis output folder (``demo/rig`` of a demo)."""
+    return any((f / OUTPUT_MARKER).is_file() for f in (folder, *folder.parents))
+
+
+def _samefile(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def check_output_folder(out_dir, inputs=(), what: str = "--out", allow=()) -> Path:
-    """Refuse an output folder whose replacement would delete what is not an output: an empty path
-    (the current folder), the current folder or one above it, or an input (or a folder holding one).
-    Called by every command before any work, and by :func:`atomic_directory` before the swap.
+    """:func:`check_output` for a folder (kept for the library callers)."""
+    return check_output(out_dir, inputs, kind="folder", what=what, allow=allow)
 
-    ``inputs``: paths the command reads (None entries are skipped); ``allow``: inputs the output
-    may replace (``rig --resume RUN --out RUN`` updates the run in place)."""
-    from .errors import InputError
 
-    if not str(out_dir).strip():
-        raise InputError(f"{what}: expected an output folder path, found an empty string (it would "
-                         "replace the current folder)")
-    out = Path(out_dir).absolute().resolve()
-    cwd = Path.cwd().resolve()
-    if out == cwd or out in cwd.parents:
-        raise InputError(f"{what} {out_dir}: expected a new folder or a previous output, found "
-                         f"{'the current folder' if out == cwd else 'a folder above the current one'} "
-                         "(replacing it would delete everything in it)")
-    allowed = {Path(a).absolute().resolve() for a in allow if a is not None}
-    for p in inputs:
-        if p is None:
+# ----------------------------------------------------------------------------------------------
+# run folders: a lock held for the run's life, a token, recovery after a crash
+
+class _Run:
+    """A run folder ``.NAME.facebasis-XXXX`` beside ``out``, locked for this process's run."""
+
+    def __init__(self, out: Path):
+        self.out = out
+        self.dir = Path(tempfile.mkdtemp(prefix=f".{out.name}{RUN_INFIX}", dir=out.parent))
+        self.token = secrets.token_hex(16)
+        self._fd = os.open(self.dir / _LOCK, os.O_RDWR | os.O_CREAT, 0o600)
+        fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        (self.dir / _TOKEN).write_text(f"{self.token}\n")
+        _open_up(self.dir, directory=True)
+
+    def check_owned(self) -> None:
+        """Raise if the run folder was taken away (deleted or replaced by another process)."""
+        try:
+            ok = (self.dir / _TOKEN).read_text().strip() == self.token
+        except OSError:
+            ok = False
+        if not ok:
+            raise _input_error(f"output {self.out}: expected this run's staging folder {self.dir}, found it removed "
+                               "or replaced by another process; nothing was written")
+
+    def close(self) -> None:
+        """Remove the run folder and release the lock (the lock last: until then no one recovers it)."""
+        shutil.rmtree(self.dir, ignore_errors=True)
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def _lock_is_free(run_dir: Path) -> bool | None:
+    """True if nobody holds the run folder's lock (its run is dead), False if a live run holds it,
+    None if it has no lock file."""
+    try:
+        fd = os.open(run_dir / _LOCK, os.O_RDWR)
+    except FileNotFoundError:
+        return None
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            return False
+        raise
+    finally:
+        os.close(fd)
+    return True
+
+
+def recover(out: str | os.PathLike) -> list[str]:
+    """Finish or undo what dead runs left beside ``out``; returns what was done (for messages).
+
+    A run folder whose lock is free: if it holds ``old`` and ``out`` is missing, the kill fell
+    between the two renames of a swap, and the old output is put back; if it holds ``old`` and
+    ``out`` exists, the swap had completed and ``old`` is the replaced output; otherwise it holds
+    at most a half-built output. The run folder is then removed. Run folders of live runs (lock
+    held) are left alone.
+    """
+    out = Path(os.path.abspath(os.fspath(out)))
+    done = []
+    pattern = re.compile(re.escape(f".{out.name}{RUN_INFIX}") + r"[A-Za-z0-9_]+$")
+    try:
+        siblings = [p for p in out.parent.iterdir() if pattern.match(p.name) and p.is_dir() and not p.is_symlink()]
+    except (FileNotFoundError, NotADirectoryError):
+        return done
+    for run in siblings:
+        free = _lock_is_free(run)
+        if free is False:
             continue
-        q = Path(p).absolute().resolve()
-        if q in allowed:
-            continue
-        if out == q or out in q.parents:
-            raise InputError(f"{what} {out_dir}: expected a folder apart from the inputs, found "
-                             f"{'the input' if out == q else 'a folder holding the input'} {p} (replacing it "
-                             "would delete it)")
-    return out
+        if free is None and time.time() - run.stat().st_mtime < _LOCKLESS_GRACE_SECONDS:
+            continue  # a run between its mkdir and its lock, or one that died there a moment ago
+        old = run / _OLD
+        with deferred_interrupts():
+            if os.path.lexists(old) and not os.path.lexists(out):
+                os.replace(old, out)
+                done.append(f"restored the previous {out.name} that an interrupted run had moved aside")
+            shutil.rmtree(run, ignore_errors=True)
+    return done
+
+
+def _swap_in(new: Path, out: Path, run: _Run) -> None:
+    """Replace ``out`` by ``new`` (inside the run folder); a failure half-way puts the old one back."""
+    run.check_owned()
+    old = run.dir / _OLD
+    had_old = os.path.lexists(out)
+    if had_old:
+        os.replace(out, old)
+    try:
+        os.replace(new, out)
+    except BaseException:
+        if had_old:
+            os.replace(old, out)
+        raise
 
 
 @contextlib.contextmanager
-def atomic_directory(out_dir: str | os.PathLike) -> Iterator[Path]:
+def atomic_directory(out_dir: str | os.PathLike, inputs: Iterable = (), allow: Iterable = ()) -> Iterator[Path]:
     """Yield a fresh staging folder that replaces ``out_dir`` only if the block succeeds.
 
-    The staging folder is a sibling of ``out_dir`` (same file system, so the final rename is
-    atomic). If the block raises (an interrupt included), the staging folder is deleted and an
-    existing ``out_dir`` is left untouched. If it succeeds, an existing ``out_dir`` is moved aside,
-    the new folder renamed into place, and the old one removed, with SIGINT held back for those
-    steps: whenever an interrupt lands, either the old or the new folder is left, and nothing else.
+    :func:`check_output` runs first (with ``inputs``). The staging folder lives in a locked run
+    folder beside ``out_dir`` (same file system, so the final rename is atomic). If the block raises
+    (an interrupt included), the run folder is deleted and an existing ``out_dir`` is left
+    untouched. If it succeeds, an existing ``out_dir`` is moved into the run folder, the new folder
+    renamed into place, and the run folder removed, with interrupts held back for those steps; a
+    SIGKILL at any point is undone or finished by :func:`recover` in the next run.
     """
-    check_output_folder(out_dir, what="output folder")
-    out = Path(out_dir).absolute()
-    from .errors import InputError
-
-    if out.exists() and not out.is_dir():
-        raise InputError(f"output folder {out}: expected a folder or a new path, found a file")
-    blocker = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
-    if blocker is not None:
-        raise InputError(f"output folder {out}: expected a folder path, found the file {blocker} in it")
-    _check_replaceable(out)
+    check_output(out_dir, inputs, kind="folder", what="output folder", allow=allow)
+    out = Path(os.path.abspath(os.fspath(out_dir)))
     out.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale(out)
-    stage = None
+    recover(out)
+    run = stage = None
     try:
         with deferred_interrupts():
-            stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+            run = _Run(out)
+            stage = run.dir / _NEW
+            stage.mkdir()
             _open_up(stage, directory=True)
             (stage / OUTPUT_MARKER).write_text("written by facebasis; a later run with this output folder replaces it\n")
+            _set_active(stage, True)
         yield stage
         with deferred_interrupts():
-            _swap_in(stage, out)
+            _set_active(stage, False)
+            _swap_in(stage, out, run)
+            run.close()
     except BaseException:
-        if stage is not None:
+        if run is not None:
             with deferred_interrupts():
-                shutil.rmtree(stage, ignore_errors=True)
+                _set_active(stage, False)
+                _restore_if_moved(run, out)
+                run.close()
         raise
 
 
-def _check_replaceable(out: Path) -> None:
-    """An existing folder is replaced only if it is empty or a previous output (its marker)."""
-    if not out.is_dir() or (out / OUTPUT_MARKER).is_file():
-        return
-    entries = sorted(p.name for p in out.iterdir())
-    if entries:
-        from .errors import InputError
-
-        shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
-        raise InputError(f"output folder {out}: expected a new or empty folder or a previous facebasis output "
-                         f"(with its {OUTPUT_MARKER} file), found a folder holding {shown}; choose another "
-                         "output folder or remove this one (it would be replaced, its files deleted)")
+def _set_active(stage: Path, active: bool) -> None:
+    # no lock: set.add/discard are atomic under the GIL, and a lock taken where an interrupt can land
+    # between its acquire and the block that releases it would deadlock the next write
+    (_ACTIVE_STAGES.add if active else _ACTIVE_STAGES.discard)(stage)
 
 
-def _swap_in(stage: Path, out: Path) -> None:
-    """Replace ``out`` by ``stage``; on a failure half-way the old ``out`` is put back."""
-    old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
-        os.replace(out, old / "x")
-    try:
-        os.replace(stage, out)
-    except BaseException:
-        if old is not None:
-            os.replace(old / "x", out)
-            old.rmdir()
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+def _restore_if_moved(run: _Run, out: Path) -> None:
+    old = run.dir / _OLD
+    if os.path.lexists(old) and not os.path.lexists(out):
+        os.replace(old, out)
+
+
+def _inside_active_stage(path: Path) -> bool:
+    return any(s == path.parent or s in path.parents for s in tuple(_ACTIVE_STAGES))
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary sibling and an atomic rename."""
-    path = Path(path)
-    if path.is_dir():
-        from .errors import InputError
+    """Write ``data`` to ``path`` so that readers see the old file or the new one, never half.
 
-        raise InputError(f"output file {path}: expected a file name, found a folder")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = None
+    Inside a staging folder of :func:`atomic_directory` (which is atomic as a whole) the file is
+    written directly. Elsewhere it is written in a locked run folder beside ``path`` and renamed
+    into place; a run folder left by a killed process is removed by the next write of ``path``.
+    The caller has checked the path with :func:`check_output` (the commands do, before any work, and
+    refuse a missing folder there; a library caller may name a new folder, which is created).
+    """
+    path = Path(os.path.abspath(os.fspath(path)))
+    if path.is_dir():
+        raise _input_error(f"output file {path}: expected a file name, found a folder")
+    if _inside_active_stage(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)  # a library call may name a new folder (the commands may not)
+    recover(path)
+    run = None
     try:
         with deferred_interrupts():
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-            fh = os.fdopen(fd, "wb")
-        with fh:
+            run = _Run(path)
+        new = run.dir / _NEW
+        with open(new, "wb") as fh:
             fh.write(data)
-        _open_up(Path(tmp), directory=False)
-        os.replace(tmp, path)
+        _open_up(new, directory=False)
+        with deferred_interrupts():
+            run.check_owned()
+            os.replace(new, path)
+            run.close()
     except BaseException:
-        if tmp is not None:
-            with deferred_interrupts(), contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
+        if run is not None:
+            with deferred_interrupts():
+                run.close()
         raise
 
 
 def atomic_write_json(path: str | os.PathLike, obj) -> None:
     """Write ``obj`` as indented JSON, atomically."""
     atomic_write_bytes(path, (json.dumps(obj, indent=2, sort_keys=False) + "\n").encode())
+
+
+def register_csv_header(header: str) -> None:
+    """Declare the first line of a CSV table facebasis writes (so a later run may replace it)."""
+    CSV_HEADERS.add(header.encode())
+
+
+__all__ = ["OUTPUT_MARKER", "check_output", "check_output_folder", "written_by_facebasis", "recover",
+           "atomic_directory", "atomic_write_bytes", "atomic_write_json", "register_csv_header"]

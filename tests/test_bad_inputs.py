@@ -54,10 +54,10 @@ CASES = [
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/notjson.json --out {o}", "expected a weights JSON file, found invalid JSON"),
     ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/list.json --out {o}", "expected a JSON object {example: {shape: weight}}, found list"),
     # output folders that are not ours to replace (an input, a folder holding one, an empty path)
-    ("transfer --template {d}/template --target {d}/target.obj --out {d}/template", "/template: expected a folder apart from the inputs, found the input"),
+    ("transfer --template {d}/template --target {d}/target.obj --out {d}/template", "/template: expected an output apart from the inputs, found the input"),
     ("transfer --template {d}/template --target {d}/target.obj --out {d}", "found a folder holding the input"),
     ("transfer --template {d}/template --target {d}/target.obj --out ''", "--out: expected an output folder path, found an empty string"),
-    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/weights.json --out {d}/examples", "expected a folder apart from the inputs, found the input"),
+    ("rig --template {d}/template --target {d}/target.obj --examples {d}/examples --weights {d}/weights.json --out {d}/examples", "expected an output apart from the inputs, found the input"),
     ("transfer --template {d}/template --target {d}/target.obj --out {d}/afile/out", "/afile/out: expected a folder path, found the file"),
     ("transfer --template {d}/template --target {d}/target.obj --out {d}/userfolder", "/userfolder: expected a new or empty folder or a previous facebasis output (with its .facebasis-output file), found a folder holding notes.txt"),
     # rig options a resumed run takes from the run, contradictory options, inputs that would be dropped
@@ -70,7 +70,8 @@ CASES = [
     ("verify {d}/template --tolerance -1", "--tolerance: expected a relative gap >= 0, found -1"),
     ("verify {d}/template", "expected inputs.json (written by `facebasis rig`), found no such file"),
     ("verify {d}/nope", "expected inputs.json"),
-    ("export {d}/template --out {d}/template", "expected a file name, found a folder"),
+    ("export {d}/template --out {d}/template", "found the input"),
+    ("export {d}/template --out {d}/userfolder", "expected a file name, found a folder"),
     ("export {d}/nope --out {o}.glb", "expected a folder of meshes, found no such folder"),
     # virtual edges, penetration
     ("virtual-edges {d}/nope.obj --out {o}.json", "nope.obj: expected a mesh file, found no such file"),

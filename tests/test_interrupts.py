@@ -130,16 +130,6 @@ def test_replacing_a_file_interrupted_at_every_step_leaves_old_or_new_and_nothin
     assert ("old", True) in outcomes and ("new", False) in outcomes
 
 
-def test_a_staging_folder_of_a_dead_process_is_removed(tmp_path):
-    out = tmp_path / "out"
-    stale = tmp_path / ".out.partial-999999999-abc"
-    stale.mkdir()
-    (stale / "half.obj").write_bytes(b"v 0 0 0\n")
-    with atomic_directory(out) as stage:
-        (stage / "a.txt").write_bytes(b"a")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
-
-
 def test_outputs_get_the_usual_permissions(tmp_path):
     old = os.umask(0o022)
     try:
@@ -199,5 +189,5 @@ def test_a_file_output_that_is_a_folder_is_a_clear_error(tmp_path, capsys):
     (tmp_path / "taken").mkdir()
     assert main(["export", str(tmp_path / "rig"), "--out", str(tmp_path / "taken")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"error: output file {tmp_path / 'taken'}: expected a file name, found a folder")
+    assert err.startswith(f"error: --out {tmp_path / 'taken'}: expected a file name, found a folder")
     assert list((tmp_path / "taken").iterdir()) == []

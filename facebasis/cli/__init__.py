@@ -55,6 +55,9 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        from .outputs import check_command_outputs
+
+        check_command_outputs(args)  # the one output rule, before any work
         return int(args.func(args) or 0)
     except FacebasisError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .outputs import Outputs
+
 DESCRIPTION = """\
 Track a face through a video file or a folder of images (sorted by name).
 Give the face's landmarks on the first frame with --landmarks (an iBUG .pts file
@@ -49,7 +51,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "detections with --detector), since closed lips put an upper and a lower point on one "
                         "patch that LK cannot split; 'track' tracks the lip line itself (the mouth may not open)")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
-    p.set_defaults(func=cmd_capture)
+    p.set_defaults(func=cmd_capture, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("input", "landmarks")))
     return p
 
 

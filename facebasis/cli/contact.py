@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .outputs import READS_ONLY, Outputs
+
 
 def cmd_virtual_edges(args) -> int:
     from ..contact.penetration import parse_region
@@ -15,15 +17,27 @@ def cmd_virtual_edges(args) -> int:
     mask = parse_region(args.region, len(V)) if args.region else None
     ve = detect_virtual_edges(V, F, cap=args.cap, ratio=args.ratio, per_vertex=args.per_vertex,
                               spacing=args.spacing, vertex_mask=mask, name=str(args.mesh))
+    if args.figure:  # the figure first: a failure there leaves no edges file half a result
+        from ..report.figures import virtual_edges_figure
+
+        figure = Path(args.figure)
+        paths = virtual_edges_figure(V, F, ve.edges, figure, title=f"{Path(args.mesh).name}: {len(ve)} virtual edges",
+                                     formats=(figure.suffix.lower()[1:],))
     ve.write(args.out)
     print(f"{len(ve)} virtual edges ({ve.candidates} candidate pairs with distance < {ve.cap:.4g} and "
           f"geodesic/Euclidean >= {ve.ratio:g}) in {ve.seconds:.2f} s -> {args.out}")
     if args.figure:
-        from ..report.figures import virtual_edges_figure
-
-        paths = virtual_edges_figure(V, F, ve.edges, Path(args.figure), title=f"{args.mesh}: {len(ve)} virtual edges")
         print(f"figure -> {', '.join(map(str, paths))}")
     return 0
+
+
+def _figure_file(text: str) -> str:
+    """``--figure``: a .png, .pdf or .svg file name (its suffix is the format)."""
+    import argparse
+
+    if Path(text).suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise argparse.ArgumentTypeError(f"expected a .png, .pdf or .svg file name, found {text!r}")
+    return text
 
 
 def cmd_penetration(args) -> int:
@@ -73,8 +87,10 @@ def register(sub) -> None:
                    help=f"exclusion radius around chosen ends, mesh units (default {DEFAULT_SPACING_EDGES:g} median "
                         "edge lengths; 0: no exclusion)")
     p.add_argument("--region", default=None, metavar="START:END", help="only vertices START..END-1 as ends")
-    p.add_argument("--figure", default=None, metavar="PNG", help="also draw the edges over the mesh")
-    p.set_defaults(func=cmd_virtual_edges)
+    p.add_argument("--figure", default=None, metavar="FIGURE.png", type=_figure_file,
+                   help="also draw the edges over the mesh (.png, .pdf or .svg)")
+    p.set_defaults(func=cmd_virtual_edges,
+                   outputs=Outputs(writes=(("out", "file", "--out"), ("figure", "file", "--figure")), reads=("mesh",)))
 
     p = sub.add_parser("penetration", help="count intersecting triangle pairs exactly")
     p.add_argument("mesh", help="mesh to check")
@@ -87,4 +103,4 @@ def register(sub) -> None:
                    help="with --rest: triangles closer than K median edge lengths along REST are a local fold "
                         f"(default {LOCAL_FOLD_EDGES:g})")
     p.add_argument("--show", type=int, default=10, help="list this many pairs (default 10)")
-    p.set_defaults(func=cmd_penetration)
+    p.set_defaults(func=cmd_penetration, outputs=READS_ONLY)

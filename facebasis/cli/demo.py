@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .outputs import Outputs
+
 
 def cmd_demo(args) -> int:
     from ..defaults.demo import run_demo
@@ -17,4 +19,4 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="run the main job on the built-in default face")
     p.add_argument("--out", default="facebasis-demo", help="output folder (default: ./facebasis-demo)")
     p.add_argument("--quick", action="store_true", help="fewer iterations (for smoke tests)")
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=cmd_demo, outputs=Outputs(writes=(("out", "folder", "--out"),)))

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 from .common import Once
+from .outputs import Outputs
 
 
 def cmd_register(args) -> int:
@@ -34,4 +35,5 @@ def register(subparsers) -> None:
                         "names to such lists) and the template's landmark vertex indices, in the same order")
     p.add_argument("--neutral", default=None, metavar="NAME",
                    help="the neutral scan's file name or stem inside the folder (default: neutral)")
-    p.set_defaults(func=cmd_register)
+    p.set_defaults(func=cmd_register, outputs=Outputs(writes=(("out", "folder", "--out"),),
+                                                     reads=("scans", "template", "landmarks")))

@@ -4,24 +4,41 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .outputs import Outputs
+
+
+def _default_report_folder(args, attr):
+    """``report``'s output when --out is not given: RUN_DIR/report, or the CSV's name without .csv."""
+    target = Path(args.path)
+    return str(target.with_suffix("") if target.suffix.lower() == ".csv" else target / "report")
+
 
 def cmd_report(args) -> int:
+    from ..atomic import atomic_directory
     from ..report.run_report import report_run, sweep_report
 
     target = Path(args.path)
     formats = tuple(args.formats.split(","))
-    if target.suffix.lower() == ".csv":
+    out = Path(args.out if args.out is not None else _default_report_folder(args, "out"))
+    table = None
+    if target.suffix.lower() == ".csv":  # inputs read before the output folder is staged
         from ..report.studies import read_table
 
-        out = Path(args.out) if args.out else target.with_suffix("")
-        paths = sweep_report(read_table(target), out, formats)
-        if not paths:
-            from ..errors import InputError
+        table = read_table(target)
+    elif not (target / "history.json").is_file():
+        from ..errors import InputError
 
-            raise InputError(f"{target}: expected rows of at least one study, found none")
-    else:
-        paths = report_run(target, args.out, formats)
-    print(f"{len(paths)} files -> {paths[0].parent}")
+        raise InputError(f"{target}: expected history.json (a `facebasis rig` output folder), found no such file")
+    with atomic_directory(out, inputs=(target,)) as stage:
+        if table is not None:
+            paths = sweep_report(table, stage, formats)
+            if not paths:
+                from ..errors import InputError
+
+                raise InputError(f"{target}: expected rows of at least one study, found none")
+        else:
+            paths = report_run(target, stage, formats, written_as=out)
+    print(f"{len(paths)} files -> {out}")
     return 0
 
 
@@ -50,7 +67,8 @@ def register(sub) -> None:
     p.add_argument("path", help="rig output folder, or the results .csv of facebasis sweep")
     p.add_argument("--out", default=None, help="output folder (default: RUN_DIR/report, or the CSV's name)")
     p.add_argument("--formats", default="png,pdf", help="figure formats (default png,pdf)")
-    p.set_defaults(func=cmd_report)
+    p.set_defaults(func=cmd_report, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("path",),
+                                                   default=_default_report_folder))
 
     p = sub.add_parser("sweep", help="alpha / lambda / noise / method studies in parallel (Dask)")
     p.add_argument("--problem", default="default", choices=("default", "ict"),
@@ -61,4 +79,6 @@ def register(sub) -> None:
     p.add_argument("--scheduler", default=None, help="address of a Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_sweep)
+    from ..report import studies  # noqa: F401  (registers the results table's header: a later sweep may replace it)
+
+    p.set_defaults(func=cmd_sweep, outputs=Outputs(writes=(("out", "file", "--out"),)))

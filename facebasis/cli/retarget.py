@@ -6,6 +6,13 @@
 
 from __future__ import annotations
 
+from .outputs import Outputs, capture_video
+
+_OUT = (("out", "folder", "--out"),)
+
+
+def _capture_video(args):
+    return capture_video(args.capture) + ([args.rig] if getattr(args, "rig", None) not in (None, "default") else [])
 
 
 def cmd_animate2d(args) -> int:
@@ -61,7 +68,8 @@ def register(subparsers) -> None:
     p.add_argument("--landmarks", default=None, metavar="CARTOON.pts",
                    help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
     p.add_argument("--out", required=True, help="output folder")
-    p.set_defaults(func=cmd_animate2d)
+    p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),
+                                                      derived=_capture_video))
 
     p = subparsers.add_parser(
         "animate3d", help="drive a 3D face mesh with a tracked face video",
@@ -74,7 +82,8 @@ def register(subparsers) -> None:
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
                    help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
     p.add_argument("--out", required=True, help="output folder")
-    p.set_defaults(func=cmd_animate3d)
+    p.set_defaults(func=cmd_animate3d, outputs=Outputs(writes=_OUT, reads=("capture", "mesh", "landmarks"),
+                                                      derived=_capture_video))
 
     p = subparsers.add_parser(
         "retarget", help="blendshape weights and head pose of a rig for every frame of a tracked video",
@@ -115,7 +124,8 @@ def register(subparsers) -> None:
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="older spelling of --identity first-frame (still accepted)")
     p.add_argument("--out", required=True, help="output folder")
-    p.set_defaults(func=cmd_retarget)
+    p.set_defaults(func=cmd_retarget, outputs=Outputs(writes=_OUT, reads=("capture", "landmarks"),
+                                                     derived=_capture_video))
 
 
 __all__ = ["register", "cmd_animate2d", "cmd_animate3d", "cmd_retarget"]

@@ -7,18 +7,18 @@ import sys
 import time
 from pathlib import Path
 
+from .outputs import READS_ONLY, Outputs
 from .common import (add_rig_folder_args, add_virtual_edge_args, check_virtual_edge_args, describe_pairs,
                      pair_of_floats, virtual_edges_for)
 
 
 def cmd_transfer(args) -> int:
-    from ..atomic import atomic_directory, check_output_folder
+    from ..atomic import atomic_directory
     from ..geometry.rig import load_rig_folder, load_target_neutral, write_shapes
     from ..geometry.transfer import DeformationTransfer
 
     _check_contact_flags(args)
     check_virtual_edge_args(args)
-    check_output_folder(args.out, (args.template, args.target))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact:  # names, size and the target's own intersections, before any solving (as rig does)
@@ -143,7 +143,7 @@ def _warnings(result, options, names):
 
 
 def cmd_rig(args) -> int:
-    from ..atomic import atomic_directory, check_output_folder
+    from ..atomic import atomic_directory
     from ..errors import InputError
     from ..geometry.rig import load_rig_folder, load_target_neutral
     from ..rigging.examples import load_examples, load_weights, parse_pairs
@@ -162,7 +162,6 @@ def cmd_rig(args) -> int:
     # everything is validated before any solving starts
     _check_contact_flags(args)
     options = _rig_options(args)
-    check_output_folder(args.out, (args.template, args.target, args.examples, args.weights))
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact:
@@ -242,8 +241,26 @@ def _contact_verdict(contact, what: str, excluded) -> int:
     return 0
 
 
+def _edges_file(args) -> list:
+    """``--virtual-edges EDGES.json`` (without a file the edges are detected: nothing read)."""
+    return [] if args.virtual_edges in (None, "detect") else [args.virtual_edges]
+
+
+def _resumed_run_inputs(args) -> list:
+    """The inputs a run to resume records (its example folders, weight files, template and target):
+    ``rig --resume RUN --out X`` reads them, so X must spare them too."""
+    if args.resume is None or not (Path(args.resume) / "inputs.json").is_file():
+        return []
+    from ..rigging.verify import read_inputs
+
+    inputs, ex_dirs, w_files = read_inputs(args.resume)
+    src = inputs.get("sources") or {}
+    return [*ex_dirs, *w_files, *(Path(args.resume) / src[k] for k in ("template", "target")
+                                  if isinstance(src.get(k), str))]
+
+
 def _cmd_rig_resume(args) -> int:
-    from ..atomic import atomic_directory, check_output_folder
+    from ..atomic import atomic_directory
     from ..errors import InputError
     from ..geometry.rig import load_rig_folder
     from ..rigging.enrich import resume_run
@@ -258,18 +275,13 @@ def _cmd_rig_resume(args) -> int:
                                 ("--exclusive", bool(args.exclusive))) if v] + args.cv_given + args.run_given
         raise InputError(f"--resume: expected the run's own schedule and pairs, found {', '.join(given)} "
                          "(start a new run to change them)")
-    recorded = []
     if (Path(args.resume) / "inputs.json").is_file():
         from ..rigging.verify import read_inputs
 
-        inputs, ex_dirs, w_files = read_inputs(args.resume)  # the run's own inputs must survive too
-        src = inputs.get("sources") or {}
-        recorded = [*ex_dirs, *w_files, *(Path(args.resume) / src[k] for k in ("template", "target") if k in src)]
+        src = read_inputs(args.resume)[0].get("sources") or {}
         if src.get("virtual_edges") is True and args.virtual_edges is None:
             raise InputError(f"--resume {args.resume}: expected --virtual-edges (and --template) as the run was made "
                              "with virtual edges, found none (the resumed run would drop their energy)")
-    check_output_folder(args.out, (args.resume, args.template, args.target, args.examples, args.weights, *recorded),
-                        allow=(args.resume,))
     ve = None
     if args.virtual_edges is not None:
         if not args.template:
@@ -391,7 +403,8 @@ def register(sub) -> None:
     p.add_argument("--contact-allow-target-pairs", action="store_true",
                    help="with --contact: accept a target neutral that intersects itself where the template does "
                         "not (those pairs stay allowed); without it that is an error naming the pairs")
-    p.set_defaults(func=cmd_transfer)
+    p.set_defaults(func=cmd_transfer, outputs=Outputs(writes=(("out", "folder", "--out"),),
+                                                     reads=("template", "target"), derived=_edges_file))
 
     p = sub.add_parser("rig", help="example-based blendshape generation (Gao et al. 2015)")
     p.add_argument("--template", default=None, help="template rig folder (neutral + one mesh per blendshape)")
@@ -446,14 +459,17 @@ def register(sub) -> None:
                    help="add the training expressions of --examples/--weights to this finished run and warm-start "
                         "from its blendshapes and weights (template and target default to the run's)")
     add_virtual_edge_args(p)
-    p.set_defaults(func=_cmd_rig_defaults(cmd_rig, defaults))
+    p.set_defaults(func=_cmd_rig_defaults(cmd_rig, defaults),
+                   outputs=Outputs(writes=(("out", "folder", "--out"),),
+                                   reads=("template", "target", "examples", "weights", "resume"),
+                                   derived=lambda a: _edges_file(a) + _resumed_run_inputs(a), allow=("resume",)))
 
     p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
     p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a facebasis rig output")
     p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder (default neutral.obj)")
     p.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="ignore matching files")
     p.add_argument("--out", required=True, help="output .glb")
-    p.set_defaults(func=cmd_export)
+    p.set_defaults(func=cmd_export, outputs=Outputs(writes=(("out", "file", "--out"),), reads=("rig",)))
 
     p = sub.add_parser("verify", help="certify the stored weights of a facebasis rig output folder")
     p.add_argument("run_dir", help="output folder of facebasis rig (with inputs.json)")
@@ -462,4 +478,4 @@ def register(sub) -> None:
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="also report the largest product x_a x_b of the stored weights over these pairs "
                         "(several after one flag or repeated); exit status 1 if any exceeds 1e-8")
-    p.set_defaults(func=cmd_verify)
+    p.set_defaults(func=cmd_verify, outputs=READS_ONLY)

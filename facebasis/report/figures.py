@@ -45,6 +45,11 @@ def _pyplot():
     return plt
 
 
+#: the software tag of every figure (PNG Software, PDF/SVG Creator): facebasis.atomic recognises its
+#: own figures by it, so a later run may replace them and never a user's own file of the same name
+SOFTWARE = "facebasis (matplotlib)"
+
+
 def save(fig, path: Path, formats=("png",)) -> list[Path]:
     """Save a figure in each format (atomically per file) and close it."""
     import io
@@ -57,7 +62,8 @@ def save(fig, path: Path, formats=("png",)) -> list[Path]:
     for fmt in formats:
         buf = io.BytesIO()
         # no creation date in PDF/SVG metadata: the same result gives the same file
-        meta = {"CreationDate": None} if fmt == "pdf" else ({"Date": None} if fmt == "svg" else None)
+        meta = {"CreationDate": None, "Creator": SOFTWARE} if fmt == "pdf" else (
+            {"Date": None, "Creator": SOFTWARE} if fmt == "svg" else {"Software": SOFTWARE})
         fig.savefig(buf, format=fmt, dpi=200, bbox_inches="tight", pad_inches=0.03,
                     metadata=meta)
         p = Path(path).with_suffix("." + fmt)

@@ -84,7 +84,7 @@ def _run_tables(out: Path, history: dict, weights: dict, residuals: dict) -> lis
     return paths
 
 
-def _run_index(run: Path, out: Path, history: dict, residuals: dict, paths: list[Path]) -> Path:
+def _run_index(run: Path, out: Path, history: dict, residuals: dict, paths: list[Path], written_as=None) -> Path:
     its = history["iterations"]
     r = residuals["relative_residual"]
     first, last = its[0], its[-1]
@@ -106,8 +106,8 @@ def _run_index(run: Path, out: Path, history: dict, residuals: dict, paths: list
     figs, tabs = {}, {}
     for p in existing:
         (figs if p.suffix in (".png", ".pdf", ".svg") else tabs).setdefault(p.stem, []).append(p.name)
-    lines = [f"# Rig run report: `{_rel(run, out)}`", "",
-             f"Figures and tables of the `facebasis rig` output folder `{_rel(run, out)}` (relative to this file), "
+    lines = [f"# Rig run report: `{_rel(run, written_as or out)}`", "",
+             f"Figures and tables of the `facebasis rig` output folder `{_rel(run, written_as or out)}` (relative to this file), "
              "made by `facebasis report` from its history.json, weights.json and residuals.json.", "",
              "## Key numbers", ""] + key + ["", "## Figures", "", "| figure | what it shows |", "|---|---|"]
     lines += [f"| {' '.join(f'[`{n}`]({n})' for n in names)} | {RUN_FILES.get(stem, '')} |" for stem, names in figs.items()]
@@ -144,12 +144,13 @@ def crossval_figure(run_dir, path: Path, formats=FORMATS) -> list[Path]:
     return save(fig, path, formats)
 
 
-def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None) -> list[Path]:
+def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None, written_as=None) -> list[Path]:
     """Figures and tables of a ``facebasis rig`` output folder (written to ``RUN_DIR/report`` by
     default) and an ``index.md`` naming each file with what it shows and the run's key numbers.
 
     ``renders_dir``: where the shape renders go (default ``out``); renders elsewhere are not listed
-    in the index (used for faces that must not be committed with the report)."""
+    in the index (used for faces that must not be committed with the report); ``written_as``: the
+    folder ``out`` will become (when ``out`` is a staging folder), for the index's relative paths."""
     from ..geometry.rig import load_rig_folder
     from .figures import COLUMN, DIMENSIONLESS, PAGE, legend_outside, unit
 
@@ -203,7 +204,7 @@ def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None) -> list[Pat
     renders = out if renders_dir is None else Path(renders_dir)
     paths += shapes_figure(rig, renders / "shapes", formats=formats)
     paths += _run_tables(out, history, weights, residuals)
-    paths.append(_run_index(run, out, history, residuals, paths))
+    paths.append(_run_index(run, out, history, residuals, paths, written_as))
     return paths
 
 

@@ -35,6 +35,15 @@ COLUMNS = ("study", "problem", "seed", "method", "alpha0", "alpha1", "lam0", "la
            "heldout_error", "train_error", "shape_error", "rig_change", "seconds")
 
 
+def _register_header() -> None:
+    from ..atomic import register_csv_header
+
+    register_csv_header(",".join(COLUMNS))  # a later `facebasis sweep --out` may replace this table
+
+
+_register_header()
+
+
 @dataclass(frozen=True)
 class Task:
     study: str

@@ -93,17 +93,20 @@ class GltfBuffer:
         self.offset += len(raw) + pad
         return len(self.views) - 1
 
-    def add(self, data: np.ndarray, kind: str, target: int | None = None, minmax: bool = False) -> int:
-        """An accessor of ``data`` (float32 or uint32; (count,) for SCALAR, (count, c) otherwise)."""
+    def add(self, data: np.ndarray, kind: str, target: int | None = None, minmax=False) -> int:
+        """An accessor of ``data`` (float32 or uint32; (count,) for SCALAR, (count, c) otherwise);
+        ``minmax``: True to store its bounds, or the bounds (lo, hi) already computed."""
         data = np.ascontiguousarray(data)
         component = _UINT if data.dtype == np.uint32 else _FLOAT
         count = int(data.size if kind == "SCALAR" else len(data))
         acc = {"bufferView": self.view(data.tobytes(), target), "componentType": component, "count": count,
                "type": kind}
-        if minmax:
+        if minmax is True:
             d2 = data.reshape(count, -1)
-            acc["min"] = [float(v) for v in d2.min(0)]
-            acc["max"] = [float(v) for v in d2.max(0)]
+            minmax = d2.min(0), d2.max(0)
+        if minmax is not False:
+            acc["min"] = [float(v) for v in minmax[0]]
+            acc["max"] = [float(v) for v in minmax[1]]
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
@@ -132,21 +135,19 @@ def _corner_keys(layout, F):
 
 
 def _gl_normals(V, F, layout, split):
-    """Area-weighted normals (g, 3) of positions V at the glTF vertices."""
+    """Area-weighted normals (g, 3) (or (k, g, 3) for positions (k, n, 3)) at the glTF vertices."""
     from .objlayout import layout_normals
 
     if split is not None and split[2] is not None:
-        N = layout_normals(V, F, layout.face_normal, layout.normals)
+        N = layout_normals(V, F, layout.face_normal, layout.normals, np.float32)
         slot = split[2]
-        per_v = None
+        out = N[..., np.maximum(slot, 0), :]
         if (slot < 0).any():  # corners without vn: their vertex normal
-            per_v = layout_normals(V, F)
-        out = N[np.maximum(slot, 0)]
-        if per_v is not None:
-            out[slot < 0] = per_v[split[0][slot < 0]]
+            per_v = layout_normals(V, F, dtype=np.float32)
+            out[..., slot < 0, :] = per_v[..., split[0][slot < 0], :]
         return out
-    N = layout_normals(V, F)
-    return N if split is None else N[split[0]]
+    N = layout_normals(V, F, dtype=np.float32)
+    return N if split is None else N[..., split[0], :]
 
 
 def gltf_document(neutral, faces, targets, names, *, unit: str = DEFAULT_UNIT, layout=None, name: str = "face",
@@ -203,12 +204,15 @@ def gltf_document(neutral, faces, targets, names, *, unit: str = DEFAULT_UNIT, l
         uv[:, 1] = 1.0 - uv[:, 1]
         attrs["TEXCOORD_0"] = buf.add(uv.astype(np.float32), "VEC2", _ARRAY_BUFFER)
     tgts = []
-    for d in D:
-        t = {"POSITION": buf.add((d[gv] * scale).astype(np.float32), "VEC3", _ARRAY_BUFFER, True)}
-        if normals:
-            t["NORMAL"] = buf.add((_gl_normals(V + d, F, layout, split) - N0).astype(np.float32), "VEC3",
-                                  _ARRAY_BUFFER)
-        tgts.append(t)
+    for s0 in range(0, k, 16):  # 16 shapes per batch: one sparse product for their normals
+        Dg = (D[s0:s0 + 16, gv] * scale).astype(np.float32)
+        lo, hi = Dg.min(1), Dg.max(1)
+        dN = _gl_normals(V + D[s0:s0 + 16], F, layout, split) - N0 if normals else None
+        for j, d in enumerate(Dg):
+            t = {"POSITION": buf.add(d, "VEC3", _ARRAY_BUFFER, (lo[j], hi[j]))}
+            if normals:
+                t["NORMAL"] = buf.add(dN[j].astype(np.float32), "VEC3", _ARRAY_BUFFER)
+            tgts.append(t)
     # materials and primitives
     doc_materials, textures, images, samplers, referenced = [], [], [], [], []
     if layout is not None and layout.material_names:

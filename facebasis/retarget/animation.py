@@ -142,11 +142,12 @@ def write_rig_animation(path, rig, weights, fps: float, *, unit: str = DEFAULT_U
 
 
 # ---------------------------------------------------------------------- vertex animation, compact
-#: largest vertex error of a compact vertex animation, metres (0.2 mm: below what a viewer can see
-#: on a head-sized mesh, about 1/1000 of a face's height)
-VERTEX_TOLERANCE_M = 2e-4
+#: largest vertex error of a compact vertex animation, metres (1 mm, 1/200 of a face's height; on
+#: a real 765-frame webcam clip driving the built-in face (head motion included, 6.7 cm at most)
+#: the mean vertex error is then about 0.03 mm)
+VERTEX_TOLERANCE_M = 1e-3
 #: most PCA components kept (the error reached with them is reported when the bound is not met)
-MAX_BASIS = 48
+MAX_BASIS = 96
 
 
 @dataclass(frozen=True)

@@ -145,6 +145,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
         atomic_write_bytes(stage / "animation.glb", glb)
         summary = {"frames": cap.n_frames, "fps": cap.fps, "vertices": len(V), "scale_eq13": driver.scale,
                    "morph_targets": len(names), "animation_max_vertex_error": glb_error,
+                   "animation_error_bound": motion.tolerance, "animation_basis": motion.rank,
                    "seconds": time.perf_counter() - t0,
                    "z": "unchanged (monocular capture: in-plane motion only)"}
         atomic_write_json(stage / "summary.json", summary)

@@ -7,14 +7,19 @@ Debian's Blender 3.4 importer uses ``numpy.bool``, which NumPy 1.24+ removed: al
 import json
 import sys
 
-import numpy
+argv = sys.argv[sys.argv.index("--") + 1:]
+try:
+    import numpy
+except ImportError:  # Blender's Python without NumPy (Debian: python3-numpy): its glTF importer cannot run
+    with open(argv[0], "w") as fh:
+        json.dump({"__skip__": "Blender's Python has no NumPy (apt-get install python3-numpy)"}, fh)
+    sys.exit(0)
 
 if not hasattr(numpy, "bool"):
     numpy.bool = bool
 
 import bpy  # noqa: E402
 
-argv = sys.argv[sys.argv.index("--") + 1:]
 out, files = argv[0], argv[1:]
 
 

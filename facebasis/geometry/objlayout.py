@@ -193,13 +193,23 @@ def layout_normals(V, faces, face_normal=None, fallback=None, dtype=np.float64) 
     return out if batch else out[0]
 
 
+#: the last few incidence matrices built (a rig's shapes share one topology)
+_INCIDENCE: list = []
+
+
 def _incidence(slots: np.ndarray, q: int, m: int):
-    """(q, m) sparse matrix: 1 where a corner of triangle j names slot i (corners without one: none)."""
+    """(q, m) sparse matrix: 1 where a corner of triangle j names slot i (corners without one: none);
+    built once per topology."""
     import scipy.sparse as sp
 
-    tri = np.repeat(np.arange(m), 3)
-    keep = slots >= 0
-    return sp.csr_matrix((np.ones(int(keep.sum())), (slots[keep], tri[keep])), shape=(q, m))
+    key = (q, m, slots.tobytes())
+    hit = next((A for k, A in _INCIDENCE if k == key), None)
+    if hit is None:
+        tri = np.repeat(np.arange(m), 3)
+        keep = slots >= 0
+        hit = sp.csr_matrix((np.ones(int(keep.sum())), (slots[keep], tri[keep])), shape=(q, m))
+        _INCIDENCE[:] = [(key, hit)] + _INCIDENCE[:3]
+    return hit
 
 
 def _lines(X: np.ndarray, key: bytes) -> bytes:
@@ -209,7 +219,10 @@ def _lines(X: np.ndarray, key: bytes) -> bytes:
         text = (("v %.10f %.10f %.10f\n" * len(X)) % tuple(np.asarray(X, np.float64).ravel().tolist())).encode()
     if key == b"v ":
         return text
-    return (b"\n" + text).replace(b"\nv ", b"\n" + key)[1:]
+    buf = np.frombuffer(text, np.uint8)
+    starts = np.r_[0, np.flatnonzero(buf == _NL)[:-1] + 1]  # each line's 'v': the rest of the key after it
+    return np.insert(buf, np.repeat(starts + 1, len(key) - 2), np.frombuffer(key[1:-1], np.uint8).tolist()
+                     * len(starts)).tobytes()
 
 
 def _split_lines(text: bytes, counts: np.ndarray) -> list[bytes]:

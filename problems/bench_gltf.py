@@ -55,17 +55,21 @@ def main(argv=None) -> int:
         rig, what = default_template(), "built-in face (ICT data absent)"
     write_rig_folder(root / "rig", rig)
     print(f"{what}: {rig.n_shapes} shapes, {rig.n_vertices} vertices; load {os.getloadavg()[0]:.2f}")
-    walls = []
-    for _ in range(args.repeat):
+    import resource
+
+    def child(cmd):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "facebasis.cli", "export", str(root / "rig"), "--out",
-                        str(root / "rig.glb")], check=True, capture_output=True)
-        walls.append(time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import facebasis.cli"], check=True)
-    imp = time.perf_counter() - t0
-    print(f"facebasis export, whole process: {min(walls):.3f} s best, {statistics.median(walls):.3f} s median "
-          f"(python + imports alone: {imp:.3f} s)")
+        subprocess.run(cmd, check=True, capture_output=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.perf_counter() - t0, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+
+    runs = [child([sys.executable, "-m", "facebasis.cli", "export", str(root / "rig"), "--out", str(root / "rig.glb")])
+            for _ in range(args.repeat)]
+    imp = min(child([sys.executable, "-c", "import facebasis.cli"]) for _ in range(args.repeat))
+    print(f"facebasis export, whole process: wall {min(r[0] for r in runs):.3f} s best, "
+          f"{statistics.median(r[0] for r in runs):.3f} s median; CPU {min(r[1] for r in runs):.3f} s best "
+          f"(python + imports alone: wall {imp[0]:.3f} s, CPU {imp[1]:.3f} s)")
     best, med = _best(lambda: glb_bytes(rig), args.repeat)
     own = glb_bytes(rig)
     print(f"own GLB writer (document + normals + buffer): {best * 1e3:.0f} ms best, {med * 1e3:.0f} ms median, "

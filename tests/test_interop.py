@@ -379,3 +379,18 @@ def test_animate3d_writes_a_small_basis(tmp_path):
     W = acc(sampler.output).reshape(-1, k).astype(np.float64)
     approx = P + np.tensordot(W, D, axes=(1, 0))
     assert np.linalg.norm(approx - frames, axis=2).max() <= summary["animation_error_bound"] + 1e-4
+
+
+def test_registered_scan_keeps_the_template_layout(tmp_path):
+    """register: the registered mesh is the template's file with its v/vn lines replaced."""
+    folder, V0, shapes = facex_like_folder(tmp_path / "tpl", identities=0)
+    _, F = read_obj(folder / "generic_neutral_mesh.obj")
+    write_mesh(tmp_path / "scan.obj", shapes["jawOpen"], F)  # a plain triangle scan
+    out = tmp_path / "reg"
+    assert _main(["register", str(tmp_path / "scan.obj"), "--template", str(folder / "generic_neutral_mesh.obj"),
+                  "--out", str(out)]) == 0
+    lines = (out / "scan.obj").read_text().splitlines()
+    template = (folder / "generic_neutral_mesh.obj").read_text().splitlines()
+    assert [x for x in lines if x.split()[0] not in ("v", "vn")] == \
+        [x for x in template if x.split()[0] not in ("v", "vn")]
+    assert (out / "face.mtl").is_file() and (out / "skin.png").read_bytes() == (folder / "skin.png").read_bytes()

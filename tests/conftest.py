@@ -68,11 +68,11 @@ def _png_bytes(w=4, h=4):
     return buf.getvalue()
 
 
-def facex_like_obj(V, nx=12, ny=10):
+def facex_like_obj(V, nx=12, ny=10, normals=True):
     """OBJ text laid out as ICT-FaceKit's FaceXModel files are: a header comment, ``mtllib``, the
     ``v`` lines, ``vt`` lines with a UV seam (more ``vt`` than ``v``), one ``vn`` per vertex, then
     groups with ``usemtl`` and smoothing groups over quads, a row of triangles and one hexagon,
-    ``f v/vt/vn`` references. ``V`` (nx * ny, 3)."""
+    ``f v/vt/vn`` references (``f v/vt`` without ``normals``, as ICT-FaceKit's own files). ``V`` (nx * ny, 3)."""
     idx = np.arange(nx * ny).reshape(ny, nx)
     seam = nx // 2  # faces right of this column use a second copy of the seam column's vt
     uv = [(j / (nx - 1), i / (ny - 1)) for i in range(ny) for j in range(nx)]
@@ -82,10 +82,10 @@ def facex_like_obj(V, nx=12, ny=10):
     lines = ["# FaceXModel-like test mesh", "mtllib face.mtl"]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in V]
     lines += [f"vt {u:.6f} {v:.6f}" for u, v in uv]
-    lines += ["vn 0.000000 0.000000 1.000000"] * len(V)
+    lines += ["vn 0.000000 0.000000 1.000000"] * len(V) if normals else []
 
     def ref(i, j, right):
-        return f"{idx[i, j] + 1}/{vt_of(i, j, right) + 1}/{idx[i, j] + 1}"
+        return f"{idx[i, j] + 1}/{vt_of(i, j, right) + 1}" + (f"/{idx[i, j] + 1}" if normals else "")
 
     for i in range(ny - 1):
         if i == 0:
@@ -117,7 +117,7 @@ def facex_like_positions(nx=12, ny=10):
     return np.stack([8.0 * np.sin(T).ravel(), Y.ravel(), 8.0 * np.cos(T).ravel() + 0.3 * np.sin(Y).ravel()], 1)
 
 
-def facex_like_folder(root, nx=12, ny=10, identities=2):
+def facex_like_folder(root, nx=12, ny=10, identities=2, normals=True):
     """A folder laid out like ICT-FaceKit's FaceXModel: ``generic_neutral_mesh.obj``, expressions
     (``jawOpen``, ``mouthSmile_L``, ``browInnerUp``), ``identity000.obj`` ... , ``face.mtl`` naming
     ``skin.png`` (a real PNG) for ``map_Kd``. Returns (folder, neutral positions, {name: positions})."""
@@ -133,9 +133,9 @@ def facex_like_folder(root, nx=12, ny=10, identities=2):
     }
     for k in range(identities):
         shapes[f"identity{k:03d}"] = V0 * (1.0 + 0.05 * (k + 1))
-    (root / "generic_neutral_mesh.obj").write_text(facex_like_obj(V0, nx, ny))
+    (root / "generic_neutral_mesh.obj").write_text(facex_like_obj(V0, nx, ny, normals))
     for name, V in shapes.items():
-        (root / f"{name}.obj").write_text(facex_like_obj(V, nx, ny))
+        (root / f"{name}.obj").write_text(facex_like_obj(V, nx, ny, normals))
     (root / "face.mtl").write_text("# materials\nnewmtl skin\nKd 0.8 0.6 0.5\nmap_Kd skin.png\n\n"
                                    "newmtl lips\nKd 0.7 0.3 0.3\nd 1.0\n")
     (root / "skin.png").write_bytes(_png_bytes())

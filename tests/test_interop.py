@@ -394,3 +394,30 @@ def test_registered_scan_keeps_the_template_layout(tmp_path):
     assert [x for x in lines if x.split()[0] not in ("v", "vn")] == \
         [x for x in template if x.split()[0] not in ("v", "vn")]
     assert (out / "face.mtl").is_file() and (out / "skin.png").read_bytes() == (folder / "skin.png").read_bytes()
+
+
+def test_template_without_normals_uv_only_as_ict_ships(tmp_path):
+    """ICT-FaceKit's files have ``f v/vt`` quads and no ``vn``: outputs have no vn lines either, and the
+    glTF still gets area-weighted normals, UVs and validates."""
+    folder, V0, shapes = facex_like_folder(tmp_path / "fx", identities=0, normals=False)
+    assert _main(["export", "--template", str(folder), "--neutral", "generic_neutral_mesh.obj",
+                  "--out", str(tmp_path / "r.glb")]) == 0
+    g, acc = _gltf(tmp_path / "r.glb")
+    prim = g.meshes[0].primitives[0]
+    N = acc(prim.attributes.NORMAL)
+    np.testing.assert_allclose(np.linalg.norm(N, axis=1), 1.0, atol=1e-6)
+    rig = load_rig_folder(folder, "generic_neutral_mesh.obj")
+    expect = layout_normals(rig.neutral, rig.faces)  # per vertex, copied to both sides of the UV seam
+    P = acc(prim.attributes.POSITION)
+    v_of = np.argmin(np.linalg.norm(P[:, None] - rig.neutral[None] * 0.01, axis=2), axis=1)
+    np.testing.assert_allclose(N, expect[v_of], atol=1e-5)
+    assert prim.attributes.TEXCOORD_0 is not None
+    layout = rig.layout
+    assert layout.normals is None and layout.face_normal is None
+    out = layout.obj_bytes(rig.shape("jawOpen")).decode().splitlines()
+    src = (folder / "jawOpen.obj").read_text().splitlines()
+    assert not any(x.startswith("vn") for x in out)
+    assert [x for x in out if not x.startswith("v ")] == [x for x in src if not x.startswith("v ")]
+    from test_retarget_gltf import _validate
+
+    assert _validate(tmp_path / "r.glb")["numErrors"] == 0

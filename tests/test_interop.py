@@ -133,6 +133,12 @@ def test_layout_errors_name_the_file_and_line(tmp_path):
     (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n")
     with pytest.raises(Exception, match=r"bad.obj: line 5: expected a texture coordinate index of one of the 1"):
         read_obj_layout(tmp_path / "bad.obj")
+    (tmp_path / "tok.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/x 3/1\n")
+    with pytest.raises(Exception, match=r"tok.obj: expected numbers in the face lines, found 'x'"):
+        read_obj_layout(tmp_path / "tok.obj")
+    (tmp_path / "vt.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.5\nf 1/1 2/1 3/1\n")
+    with pytest.raises(Exception, match=r"vt.obj: line 4: expected 'vt' with 2 numbers, found 1"):
+        read_obj_layout(tmp_path / "vt.obj")
 
 
 # ------------------------------------------------------------------------------------- glTF

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import MeshError
 from .numtext import vertex_lines
-from .obj import _triangulate
+from .obj import _parse_numbers, _triangulate
 
 _NL, _SP, _TAB, _HASH, _SLASH = 10, 32, 9, 35, 47
 
@@ -369,12 +369,10 @@ def _line_text(raw: bytes, starts, nl, first):
     keep[nl + 1] -= 1     # ... to the newline, included
     mask = np.cumsum(keep, dtype=np.int8)[:-1] > 0
     buf = data[mask].copy()
-    # the keyword's remaining bytes ('t' of 'vt', ...) are blanked: the first token is the keyword
+    # the keyword's second byte ('t' of 'vt'; the keywords read here are v, f, vt, vn) is blanked
     line_start = np.r_[0, np.flatnonzero(buf == _NL)[:-1] + 1]
-    ws = (buf == _SP) | (buf == _TAB) | (buf == _NL)
-    run = np.cumsum(ws)  # the bytes before the first blank of each line
-    head = run == np.repeat(run[line_start] - ws[line_start], np.diff(np.r_[line_start, len(buf)]))
-    buf[head & ~ws] = _SP
+    c = buf[line_start]
+    buf[line_start[(c != _SP) & (c != _TAB) & (c != _NL)]] = _SP
     text = buf.tobytes()
     if b"#" in text:
         import re
@@ -390,8 +388,8 @@ def _tokens_per_line(text: bytes, n_lines: int) -> np.ndarray:
     ws = (buf == _SP) | (buf == _TAB) | (buf == _NL)
     start = ~ws
     start[1:] &= ws[:-1]
-    line_of = np.cumsum(buf == _NL) - (buf == _NL)
-    return np.bincount(line_of[start], minlength=n_lines)
+    line_start = np.r_[0, np.flatnonzero(buf == _NL)[:-1] + 1]  # every line ends in a newline
+    return np.add.reduceat(start.view(np.uint8), line_start, dtype=np.int64)
 
 
 def _line_tokens(raw: bytes, starts, nl, first) -> np.ndarray:
@@ -407,7 +405,7 @@ def _numbers(raw: bytes, starts, nl, first, width: int, name: str, what: str) ->
         line = int(starts[np.argmin(per)])
         raise MeshError(f"{name}: line {int(np.count_nonzero(np.frombuffer(raw, np.uint8)[:line] == _NL)) + 1}: "
                         f"expected '{what}' with {width} numbers, found {int(per.min())}")
-    vals = np.array(text.split(), dtype=np.float64) if n else np.zeros(0)
+    vals = _parse_numbers(np.frombuffer(text, np.uint8), int(per.sum()), np.float64, name, what)
     first_tok = np.r_[0, np.cumsum(per)[:-1]]
     return vals[first_tok[:, None] + np.arange(width)]
 
@@ -448,13 +446,9 @@ def _face_corners(text: bytes, n_lines: int, name: str) -> np.ndarray:
                         f"{int(per_tok.max())} slashes")
     spaced = text.replace(b"/", b" ")
     cnt = per_tok + 1
-    try:
-        nums = np.array(spaced.split(), dtype=np.int64)
-    except ValueError:
-        bad = next(t for t in spaced.split() if not t.lstrip(b"-").isdigit())
-        raise MeshError(f"{name}: expected integer face references, found {bad.decode(errors='replace')!r}") from None
-    if len(nums) != int(cnt.sum()):
+    if len(start) + len(slashes) != len(spaced.split()):
         raise MeshError(f"{name}: expected an index on both sides of every '/' of the face references")
+    nums = _parse_numbers(np.frombuffer(spaced, np.uint8), int(cnt.sum()), np.int64, name, "face")
     out = np.zeros((len(start), 3), np.int64)
     tok = np.repeat(np.arange(len(start)), cnt)
     within = np.arange(len(nums)) - np.repeat(np.cumsum(cnt) - cnt, cnt)

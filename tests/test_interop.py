@@ -427,3 +427,26 @@ def test_template_without_normals_uv_only_as_ict_ships(tmp_path):
     from test_retarget_gltf import _validate
 
     assert _validate(tmp_path / "r.glb")["numErrors"] == 0
+
+
+def test_generated_rig_keeps_the_template_layout(facex, tmp_path):
+    """rig: the generated shapes and rig.glb carry the template's layout (UVs, materials, quads)."""
+    folder, _, target, shapes = facex
+    _, F = read_obj(folder / "generic_neutral_mesh.obj")
+    (tmp_path / "ex").mkdir()
+    V0 = read_obj(folder / "generic_neutral_mesh.obj")[0]
+    write_mesh(tmp_path / "ex" / "ex0.obj", target + 1.1 * (shapes["jawOpen"] - V0), F)
+    write_mesh(tmp_path / "ex" / "ex1.obj", target + 0.9 * (shapes["mouthSmile_L"] - V0), F)
+    (tmp_path / "w.json").write_text(json.dumps({"ex0": {"jawOpen": 0.9}, "ex1": {"mouthSmile_L": 0.7}}))
+    out = tmp_path / "run"
+    assert _main(["rig", "--template", str(folder), "--neutral", "generic_neutral_mesh.obj", "--exclude", "identity*",
+                  "--target", str(facex[1].parent / "target.obj"),
+                  "--examples", str(tmp_path / "ex"), "--weights", str(tmp_path / "w.json"), "--iterations", "2",
+                  "--out", str(out)]) == 0
+    template = (folder / "jawOpen.obj").read_text().splitlines()
+    lines = (out / "jawOpen.obj").read_text().splitlines()
+    assert [x for x in lines if x.split()[0] not in ("v", "vn")] == \
+        [x for x in template if x.split()[0] not in ("v", "vn")]
+    assert (out / "skin.png").is_file()
+    g, _ = _gltf(out / "rig.glb")
+    assert g.meshes[0].primitives[0].attributes.TEXCOORD_0 is not None and len(g.materials) == 2

@@ -65,7 +65,7 @@ def check_gltf_path(path, what: str = "--out") -> Path:
     :class:`InputError` naming the option and the path."""
     path = Path(path)
     if path.is_dir():
-        raise InputError(f"{what} {path}: expected a file name, found a folder")
+        raise InputError(f"output file {path}: expected a file name, found a folder")  # as every command says it
     if path.suffix.lower() not in GLTF_SUFFIXES:
         raise InputError(f"{what} {path}: expected a file ending in .glb (binary glTF) or .gltf (JSON + .bin), "
                          f"found {path.suffix or 'no suffix'!r}")

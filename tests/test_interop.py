@@ -450,3 +450,29 @@ def test_generated_rig_keeps_the_template_layout(facex, tmp_path):
     assert (out / "skin.png").is_file()
     g, _ = _gltf(out / "rig.glb")
     assert g.meshes[0].primitives[0].attributes.TEXCOORD_0 is not None and len(g.materials) == 2
+
+
+def test_animate3d_unit_and_mesh_layout(tmp_path, capsys):
+    """animate3d --mesh of an OBJ with UVs keeps them in animation.glb; --unit scales to metres;
+    a bad --unit is said before any work."""
+    from facebasis.capture.trackfile import write_capture
+    from facebasis.retarget.synthetic import capture_from_landmarks
+
+    folder, V0, _ = facex_like_folder(tmp_path / "fx", identities=0)
+    rng = np.random.default_rng(2)
+    idx = rng.choice(len(V0), 12, replace=False)
+    lm0 = V0[idx, :2] * [10, -10] + 300
+    lm = lm0 + np.cumsum(rng.normal(0, 0.4, (10, 12, 2)), axis=0)
+    lm[0] = lm0
+    write_capture(tmp_path / "cap", capture_from_landmarks(lm, fps=25.0, size=(600, 600)))
+    (tmp_path / "idx.json").write_text(json.dumps(idx.tolist()))
+    base = ["animate3d", str(tmp_path / "cap"), "--mesh", str(folder / "generic_neutral_mesh.obj"),
+            "--landmarks", str(tmp_path / "idx.json")]
+    assert _main(base + ["--out", str(tmp_path / "a"), "--unit", "mm"]) == 0
+    g, acc = _gltf(tmp_path / "a" / "animation.glb")
+    assert g.asset.extras["sourceUnit"] == "mm" and g.meshes[0].primitives[0].attributes.TEXCOORD_0 is not None
+    P = acc(g.meshes[0].primitives[0].attributes.POSITION)
+    np.testing.assert_allclose(np.ptp(P, axis=0), np.ptp(V0, axis=0) * 0.001, rtol=1e-6)
+    capsys.readouterr()
+    assert _main(base + ["--out", str(tmp_path / "b"), "--unit", "km"]) == 2
+    assert "--unit: expected one of m, cm, mm" in capsys.readouterr().err and not (tmp_path / "b").exists()

@@ -20,7 +20,7 @@ def cmd_animate2d(args) -> int:
 def cmd_animate3d(args) -> int:
     from ..retarget.pipeline import run_animate3d
 
-    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print)
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print, unit=args.unit)
     print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
     return 0
 
@@ -74,6 +74,8 @@ def register(subparsers) -> None:
                    help="target mesh facing +z with y up (default: the built-in face)")
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
                    help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
+    p.add_argument("--unit", default="cm", metavar="cm|m|mm",
+                   help="the mesh's length unit; animation.glb is written in metres (default cm: the built-in face)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate3d)
 

@@ -106,16 +106,22 @@ def _default_face_mesh():
     return rig.neutral, rig.faces, face_landmarks()
 
 
-def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> dict:
+def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, unit: str = "cm") -> dict:
     """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
-    (T, n, 3), faces), ``animation.glb`` (see :meth:`MeshDriver.morph_basis`) and ``summary.json``."""
+    (T, n, 3), faces), ``animation.glb`` (morph targets over a PCA basis of the motion,
+    :func:`.animation.compact_vertex_animation`, in metres from the mesh's ``unit``, with an OBJ
+    mesh's UVs and materials) and ``summary.json``."""
+    from ..geometry.gltf import unit_scale
     from ..geometry.meshio import read_mesh
+    from ..geometry.objlayout import read_obj_layout
     from .animation import frame_times, vertex_animation_glb_bytes
     from .drive3d import MeshDriver
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
+    unit_scale(unit)                                  # a bad --unit: said before any work
     cap = read_capture(capture_dir)
+    layout = None
     if mesh is None:
         V, F, idx = _default_face_mesh()
         if landmarks is not None:
@@ -126,6 +132,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
             raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
                              f"found none")
         V, F = read_mesh(mesh)
+        layout = read_obj_layout(mesh)
         idx = read_indices(landmarks)
         name = str(mesh)
     idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
@@ -133,7 +140,8 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
     t0 = time.perf_counter()
     driver = MeshDriver(V, F, idx, cap.landmarks[0], cap.vertices[0], cap.faces)
     anim = driver.run(cap.landmarks, cap.fps)
-    glb, motion = vertex_animation_glb_bytes(V, F, anim.vertices, frame_times(cap.n_frames, cap.fps))
+    glb, motion = vertex_animation_glb_bytes(V, F, anim.vertices, frame_times(cap.n_frames, cap.fps), unit=unit,
+                                             layout=layout)
     glb_error, names = motion.max_error, motion.names
     _log(log, f"mesh: {name}, {len(V)} vertices; {cap.n_frames} frames; eq. 13 scale {driver.scale:.4g}; "
               f"factorised in {driver.setup_seconds:.2f} s; animation: {len(names)} morph targets "

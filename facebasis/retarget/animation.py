@@ -181,75 +181,100 @@ def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MA
     reconstruction keeps every vertex of every frame within ``tolerance`` (source unit), at most
     ``max_basis`` (then the error reached is reported in ``max_error``).
 
-    The basis is the right singular vectors of the centred displacement matrix X (T, 3n) (exact SVD
-    through the T x T Gram matrix for T <= 400, else a seeded randomized range finder with two
-    power iterations, Halko et al. 2011, alg. 4.4); coefficients are the exact projections
+    The basis is the right singular vectors of the centred displacement matrix X (T, 3n), float32
+    (exact SVD through the T x T Gram matrix for T <= 256, else a seeded randomized range finder
+    with one power iteration, Halko et al. 2011, alg. 4.3-4.4, and the small factor's singular
+    vectors from its k x k Gram matrix); coefficients are the exact projections
     ``(X - mean) V_r^T``, so the reported error is the error of the written animation (float32
-    storage aside). r is found by bisection on the measured largest vertex error.
+    storage aside). r is found by bisection on the largest vertex error measured on a subset of
+    frames (every 8th and the 64 with the most residual energy ``|X_f|^2 - |C_f,:r|^2``), which can
+    only under-estimate it, then checked on every frame (bisection on all frames above it if the
+    check fails), so r is the smallest for which the error over all frames meets the bound.
 
     Parameters
     ----------
     rest : (n, 3); frames : (T, n, 3); tolerance : > 0, source unit
     """
     rest = np.asarray(rest, np.float64)
-    P = np.asarray(frames, np.float64)
+    P = np.asarray(frames)
     if P.ndim != 3 or P.shape[1:] != rest.shape:
         raise InputError(f"vertex animation: expected frames (T, {len(rest)}, 3), found {P.shape}")
     if not np.isfinite(P).all():
         raise InputError("vertex animation: expected finite frames, found NaN/inf")
+    if not tolerance > 0:
+        raise InputError(f"vertex animation: expected a tolerance > 0, found {tolerance}")
     T, n = P.shape[:2]
-    X = (P - rest).reshape(T, -1)
-    mean = X.mean(0)
+    X = (np.asarray(P, np.float32) - rest.astype(np.float32)).reshape(T, -1)
+    mean = X.mean(0, dtype=np.float64).astype(np.float32)
     Xc = X - mean
+    del X
     cap = int(min(max_basis, T, 3 * n))
-    if T <= 400:
-        G = Xc @ Xc.T
-        ev, U = np.linalg.eigh(G)
+    if T <= 256:
+        ev, U = np.linalg.eigh((Xc @ Xc.T).astype(np.float64))
         order = np.argsort(ev)[::-1]
         sv = np.sqrt(np.maximum(ev[order], 0.0))
-        U = U[:, order[:cap]]
-        keep = sv[:cap] > sv[0] * 1e-12 if sv[0] > 0 else np.zeros(cap, bool)
-        Vt = (U[:, keep].T @ Xc) / sv[:cap][keep, None]
+        keep = sv[:cap] > sv[0] * 1e-6 if sv[0] > 0 else np.zeros(cap, bool)
+        Vt = ((U[:, order[:cap]][:, keep].T @ Xc) / sv[:cap][keep, None]).astype(np.float32)
     else:
         rng = np.random.default_rng(seed)
-        Y = Xc @ rng.standard_normal((Xc.shape[1], cap + 10))
-        for _ in range(2):
+        Y = Xc @ rng.standard_normal((Xc.shape[1], cap + 10)).astype(np.float32)
+        for _ in range(1):  # a power iteration, orthonormalised on the small (T, k) side only
             Q, _ = np.linalg.qr(Y)
-            Q, _ = np.linalg.qr(Xc.T @ Q)
-            Y = Xc @ Q
+            Y = Xc @ (Xc.T @ Q)
         Q, _ = np.linalg.qr(Y)
-        _, sv, Vt = np.linalg.svd(Q.T @ Xc, full_matrices=False)
-        Vt = Vt[:cap][sv[:cap] > (sv[0] * 1e-12 if len(sv) and sv[0] > 0 else np.inf)]
+        B = Q.T @ Xc  # (k, 3n): its right singular vectors from the k x k Gram matrix
+        ev, W = np.linalg.eigh((B @ B.T).astype(np.float64))
+        order = np.argsort(ev)[::-1][:cap]
+        sv = np.sqrt(np.maximum(ev[order], 0.0))
+        keep = sv > (sv[0] * 1e-6 if len(sv) and sv[0] > 0 else np.inf)
+        Vt = (W[:, order[keep]].T.astype(np.float32) @ B) / sv[keep, None].astype(np.float32)
+    Vt = np.ascontiguousarray(Vt, dtype=np.float32)
     C = Xc @ Vt.T  # (T, R) exact projections
+    energy = np.einsum("ij,ij->i", Xc, Xc, dtype=np.float64)
+    cum = np.cumsum(np.square(C, dtype=np.float64), axis=1)
 
-    def error(r: int) -> float:
+    def error(r: int, frames=None) -> float:
+        idx = np.arange(T) if frames is None else frames
         worst = 0.0
-        for a in range(0, T, 64):  # frames in blocks: memory stays at 64 frames
-            E = Xc[a:a + 64] - C[a:a + 64, :r] @ Vt[:r]
-            worst = max(worst, float(np.sqrt((E.reshape(-1, n, 3) ** 2).sum(2).max())))
+        for a in range(0, len(idx), 128):  # frames in blocks: memory stays at 128 frames
+            f = idx[a:a + 128]
+            E = Xc[f] - C[f, :r] @ Vt[:r]
+            worst = max(worst, float(np.sqrt(np.einsum("fvc,fvc->fv", *(E.reshape(len(f), n, 3),) * 2).max())))
         return worst
 
-    lo, hi = 0, len(Vt)
-    err_hi = error(hi)
-    if error(0) <= tolerance:
-        hi, err_hi = 0, error(0)
-    elif err_hi <= tolerance:
-        while hi - lo > 1:  # error(lo) > tolerance >= error(hi)
-            mid = (lo + hi) // 2
-            e = error(mid)
-            if e <= tolerance:
-                hi, err_hi = mid, e
-            else:
-                lo = mid
-    r = hi
-    C, B = C[:, :r], Vt[:r].reshape(r, n, 3)
+    def subset(r: int) -> np.ndarray:
+        resid = energy - (cum[:, r - 1] if r else 0.0)
+        top = np.argsort(resid)[-64:]
+        return np.union1d(top, np.arange(0, T, 8))
+
+    R = len(Vt)
+    lo, hi = -1, R  # on the subset: error(lo) > tolerance, hi passes (R taken as passing)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if error(mid, subset(mid)) <= tolerance:
+            hi = mid
+        else:
+            lo = mid
+    r, err = hi, error(hi)
+    if err > tolerance and r < R:  # the subset missed a frame: bisection on every frame above r
+        lo, hi, err_hi = r, R, error(R)
+        if err_hi <= tolerance:
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                e = error(mid)
+                if e <= tolerance:
+                    hi, err_hi = mid, e
+                else:
+                    lo = mid
+        r, err = hi, err_hi
+    C, B = C[:, :r].astype(np.float64), Vt[:r].astype(np.float64).reshape(r, n, 3)
     cmin, cmax = C.min(0), C.max(0)
     span = np.where(cmax - cmin > 0, cmax - cmin, 1.0)
-    offset = (mean.reshape(n, 3) + np.tensordot(cmin, B, axes=(0, 0)))[None]
+    offset = (mean.astype(np.float64).reshape(n, 3) + np.tensordot(cmin, B, axes=(0, 0)))[None]
     targets = np.concatenate([offset, B * span[:, None, None]])
     weights = np.concatenate([np.ones((T, 1)), (C - cmin) / span], axis=1)
     names = ("offset",) + tuple(f"motion{j:02d}" for j in range(r))
-    return CompactMotion(targets, names, weights, err_hi, float(tolerance), r, np.asarray(sv))
+    return CompactMotion(targets, names, weights, err, float(tolerance), r, np.asarray(sv, np.float64))
 
 
 def vertex_animation_glb_bytes(rest, faces, frames, times, *, unit: str = DEFAULT_UNIT,

@@ -268,6 +268,11 @@ def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MA
                     lo = mid
         r, err = hi, err_hi
     C, B = C[:, :r].astype(np.float64), Vt[:r].astype(np.float64).reshape(r, n, 3)
+    base = rest + mean.astype(np.float64).reshape(n, 3)
+    err = 0.0  # the error reported: of the written basis, in float64, on every frame
+    for a in range(0, T, 128):
+        E = np.asarray(P[a:a + 128], np.float64) - base - np.tensordot(C[a:a + 128], B, axes=(1, 0))
+        err = max(err, float(np.sqrt(np.einsum("fvc,fvc->fv", E, E).max())))
     cmin, cmax = C.min(0), C.max(0)
     span = np.where(cmax - cmin > 0, cmax - cmin, 1.0)
     offset = (mean.astype(np.float64).reshape(n, 3) + np.tensordot(cmin, B, axes=(0, 0)))[None]

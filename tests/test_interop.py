@@ -11,7 +11,7 @@ import pytest
 from conftest import facex_like_folder, facex_like_positions
 from facebasis.defaults.face import default_template
 from facebasis.errors import InputError
-from facebasis.geometry.meshio import read_mesh, write_mesh
+from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.obj import obj_bytes, read_obj
 from facebasis.geometry.objlayout import layout_normals, read_obj_layout
 from facebasis.geometry.rig import load_rig_folder, write_rig_folder

@@ -112,6 +112,13 @@ def written_by_facebasis(path: str | os.PathLike) -> bool:
     if suffix == ".csv":
         first = head.split(b"\n", 1)[0].rstrip(b"\r")
         return first in CSV_HEADERS
+    if suffix == ".bin":  # a .gltf's buffer: ours if the .gltf beside it is ours and names it
+        gltf = path.with_suffix(".gltf")
+        try:
+            text = gltf.read_bytes() if gltf.is_file() and gltf.stat().st_size <= 16 * 2 ** 20 else b""
+        except OSError:
+            return False
+        return written_by_facebasis(gltf) and f'"uri":"{path.name}"'.encode() in text.replace(b" ", b"")
     return any(sig in head for sig in _SIGNATURES.get(suffix, ()))
 
 

@@ -55,3 +55,88 @@ def write_rig_inputs(root, pp, n_iterations=None):
                for n, row in zip(p.example_names, p.initial_weights)}
     (root / "weights.json").write_text(json.dumps(weights))
     return root
+
+
+def _png_bytes(w=4, h=4):
+    """A tiny RGB PNG (a texture for the FaceXModel-like folder)."""
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray((np.arange(w * h * 3).reshape(h, w, 3) * 7 % 255).astype(np.uint8)).save(buf, "PNG")
+    return buf.getvalue()
+
+
+def facex_like_obj(V, nx=12, ny=10, normals=True):
+    """OBJ text laid out as ICT-FaceKit's FaceXModel files are: a header comment, ``mtllib``, the
+    ``v`` lines, ``vt`` lines with a UV seam (more ``vt`` than ``v``), one ``vn`` per vertex, then
+    groups with ``usemtl`` and smoothing groups over quads, a row of triangles and one hexagon,
+    ``f v/vt/vn`` references (``f v/vt`` without ``normals``, as ICT-FaceKit's own files). ``V`` (nx * ny, 3)."""
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    seam = nx // 2  # faces right of this column use a second copy of the seam column's vt
+    uv = [(j / (nx - 1), i / (ny - 1)) for i in range(ny) for j in range(nx)]
+    seam_vt = {i: len(uv) + i for i in range(ny)}
+    uv += [(seam / (nx - 1) + 0.01, i / (ny - 1)) for i in range(ny)]
+    vt_of = lambda i, j, right: seam_vt[i] if (j == seam and right) else idx[i, j]  # noqa: E731
+    lines = ["# FaceXModel-like test mesh", "mtllib face.mtl"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in V]
+    lines += [f"vt {u:.6f} {v:.6f}" for u, v in uv]
+    lines += ["vn 0.000000 0.000000 1.000000"] * len(V) if normals else []
+
+    def ref(i, j, right):
+        return f"{idx[i, j] + 1}/{vt_of(i, j, right) + 1}" + (f"/{idx[i, j] + 1}" if normals else "")
+
+    for i in range(ny - 1):
+        if i == 0:
+            lines += ["g mouth", "usemtl lips", "s 1"]
+        if i == 3:
+            lines += ["g head", "usemtl skin", "s off"]
+        j = 0
+        while j < nx - 1:
+            right = j >= seam
+            if i == ny - 2:  # the last row: triangles
+                lines.append("f " + " ".join(ref(a, b, right) for a, b in ((i, j), (i, j + 1), (i + 1, j + 1))))
+                lines.append("f " + " ".join(ref(a, b, right) for a, b in ((i, j), (i + 1, j + 1), (i + 1, j))))
+            elif i == 4 and j == 2:  # one hexagon over two cells
+                lines.append("f " + " ".join(ref(a, b, right) for a, b in ((i, j + 1), (i, j + 2), (i + 1, j + 2),
+                                                                          (i + 1, j + 1), (i + 1, j), (i, j))))
+                j += 1
+            else:
+                lines.append("f " + " ".join(ref(a, b, right) for a, b in ((i, j), (i, j + 1), (i + 1, j + 1),
+                                                                          (i + 1, j))))
+            j += 1
+    return "\n".join(lines) + "\n"
+
+
+def facex_like_positions(nx=12, ny=10):
+    """A half-cylinder 'head' about 20 cm tall and 16 cm wide (centimetres, as ICT)."""
+    th = np.linspace(-np.pi / 2, np.pi / 2, nx)
+    y = np.linspace(-10.0, 10.0, ny)
+    T, Y = np.meshgrid(th, y)
+    return np.stack([8.0 * np.sin(T).ravel(), Y.ravel(), 8.0 * np.cos(T).ravel() + 0.3 * np.sin(Y).ravel()], 1)
+
+
+def facex_like_folder(root, nx=12, ny=10, identities=2, normals=True):
+    """A folder laid out like ICT-FaceKit's FaceXModel: ``generic_neutral_mesh.obj``, expressions
+    (``jawOpen``, ``mouthSmile_L``, ``browInnerUp``), ``identity000.obj`` ... , ``face.mtl`` naming
+    ``skin.png`` (a real PNG) for ``map_Kd``. Returns (folder, neutral positions, {name: positions})."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    V0 = facex_like_positions(nx, ny)
+    rows = np.repeat(np.arange(ny), nx)
+    cols = np.tile(np.arange(nx), ny)
+    shapes = {
+        "jawOpen": V0 + np.c_[0 * rows, -1.5 * (rows < 4) * (4 - rows) / 4, 0 * rows],
+        "mouthSmile_L": V0 + np.c_[0.8 * (rows < 4) * (cols > nx // 2), 0.5 * (rows < 4) * (cols > nx // 2), 0 * rows],
+        "browInnerUp": V0 + np.c_[0 * rows, 0.6 * (rows > ny - 4) * np.exp(-((cols - nx / 2) / 2) ** 2), 0 * rows],
+    }
+    for k in range(identities):
+        shapes[f"identity{k:03d}"] = V0 * (1.0 + 0.05 * (k + 1))
+    (root / "generic_neutral_mesh.obj").write_text(facex_like_obj(V0, nx, ny, normals))
+    for name, V in shapes.items():
+        (root / f"{name}.obj").write_text(facex_like_obj(V, nx, ny, normals))
+    (root / "face.mtl").write_text("# materials\nnewmtl skin\nKd 0.8 0.6 0.5\nmap_Kd skin.png\n\n"
+                                   "newmtl lips\nKd 0.7 0.3 0.3\nd 1.0\n")
+    (root / "skin.png").write_bytes(_png_bytes())
+    return root, V0, shapes

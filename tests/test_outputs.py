@@ -387,3 +387,18 @@ def test_a_lockless_run_folder_is_left_alone_while_young(tmp_path):
     recover(out)
     assert (out / "kept.txt").read_text() == "the previous output"  # restored, never deleted
     assert not old.exists()
+
+
+def test_a_gltf_export_spares_a_users_bin_and_replaces_its_own(tmp_path, capsys, monkeypatch):
+    from facebasis.defaults.face import default_template
+    from facebasis.geometry.rig import write_rig_folder
+
+    monkeypatch.chdir(tmp_path)
+    write_rig_folder(tmp_path / "rig", default_template())
+    (tmp_path / "mine.bin").write_bytes(b"a user's buffer")
+    assert main(["export", "rig", "--out", "mine.gltf"]) == 2
+    assert "--out (its .bin)" in capsys.readouterr().err and (tmp_path / "mine.bin").read_bytes() == b"a user's buffer"
+    assert not (tmp_path / "mine.gltf").exists()
+    assert main(["export", "rig", "--out", "rig.gltf"]) == 0
+    assert atomic.written_by_facebasis(tmp_path / "rig.bin")
+    assert main(["export", "rig", "--out", "rig.gltf"]) == 0  # its own files: replaced

@@ -38,10 +38,11 @@ def test_glb_export_loads_back_with_identical_morph_targets(tmp_path):
     path = write_glb(rig, tmp_path / "rig.glb")
     V, F, morphs, weights = _read_glb_morphs(path)
     assert np.array_equal(F, rig.faces)
-    assert np.array_equal(V, rig.neutral.astype(np.float32))
+    # centimetres (the default source unit) written in metres
+    assert np.array_equal(V, (rig.neutral * 0.01).astype(np.float32))
     assert list(morphs) == list(rig.names) and weights == [0.0] * rig.n_shapes
     for name, d in zip(rig.names, rig.deltas):
-        assert np.array_equal(morphs[name], d.astype(np.float32))
+        assert np.array_equal(morphs[name], (d * 0.01).astype(np.float32))
     import trimesh
 
     scene = trimesh.load(path)  # a second, independent reader

@@ -77,8 +77,12 @@ def _validate(path):
     base = _validator_dir()
     if base is None:
         pytest.skip("npm package gltf-validator not installed (set FACEBASIS_GLTF_VALIDATOR to its folder)")
-    script = ("const v=require('gltf-validator');const fs=require('fs');"
-              f"v.validateBytes(new Uint8Array(fs.readFileSync({json.dumps(str(path))})))"
+    # a .gltf's buffer and images are read beside it
+    script = ("const v=require('gltf-validator');const fs=require('fs');const p=require('path');"
+              f"const f={json.dumps(str(path))};"
+              "const ext=(u)=>new Promise((ok,no)=>{try{ok(new Uint8Array(fs.readFileSync(p.join(p.dirname(f),"
+              "decodeURIComponent(u)))));}catch(e){no(e.toString());}});"
+              "v.validateBytes(new Uint8Array(fs.readFileSync(f)),{uri:f,externalResourceFunction:ext})"
               ".then(r=>{console.log(JSON.stringify(r.issues));}).catch(e=>{console.error(e);process.exit(3);});")
     out = subprocess.run(["node", "-e", script], cwd=base, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -32,6 +32,8 @@ class Outputs:
         ``(args, attribute) -> path or None``: an output's path when its option was not given.
     allow : tuple of str
         ``args`` attributes naming inputs the output may replace (``rig --resume RUN --out RUN``).
+    also : callable, optional
+        ``args -> [(path, kind, option), ...]``: files an output brings beside it (a ``.gltf``'s ``.bin``).
     """
 
     writes: tuple = ()
@@ -39,6 +41,7 @@ class Outputs:
     derived: Callable | None = None
     default: Callable | None = None
     allow: tuple = ()
+    also: Callable | None = None
 
 
 #: a command that writes nothing (verify, penetration)
@@ -63,6 +66,8 @@ def output_paths(args, spec: Outputs) -> list[tuple[str, str, str]]:
         if path is None:
             continue
         out.append((path, kind, option))
+    if spec.also is not None:
+        out += spec.also(args)
     return out
 
 

@@ -27,7 +27,7 @@ def cmd_animate2d(args) -> int:
 def cmd_animate3d(args) -> int:
     from ..retarget.pipeline import run_animate3d
 
-    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print)
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print, unit=args.unit)
     print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
     return 0
 
@@ -48,7 +48,8 @@ def cmd_retarget(args) -> int:
         print("note: --first-frame-neutral is the older spelling of --identity first-frame (it still works)")
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      ridge=args.ridge, neutral=args.neutral,
-                     identity="first-frame" if args.first_frame_neutral else args.identity, log=print)
+                     identity="first-frame" if args.first_frame_neutral else args.identity, log=print,
+                     animate_pose=not args.no_pose, unit=args.unit)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -81,6 +82,8 @@ def register(subparsers) -> None:
                    help="target mesh facing +z with y up (default: the built-in face)")
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
                    help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
+    p.add_argument("--unit", default="cm", metavar="cm|m|mm",
+                   help="the mesh's length unit; animation.glb is written in metres (default cm: the built-in face)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate3d, outputs=Outputs(writes=_OUT, reads=("capture", "mesh", "landmarks"),
                                                       derived=_capture_video))
@@ -123,6 +126,11 @@ def register(subparsers) -> None:
                         "expression). 'rig': the rig's own neutral")
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="older spelling of --identity first-frame (still accepted)")
+    p.add_argument("--unit", default="cm", metavar="cm|m|mm",
+                   help="the rig's length unit; animation.glb is written in metres (default cm: ICT-FaceKit and the "
+                        "built-in face)")
+    p.add_argument("--no-pose", action="store_true",
+                   help="leave the head's rotation and translation out of animation.glb (weights only)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_retarget, outputs=Outputs(writes=_OUT, reads=("capture", "landmarks"),
                                                      derived=_capture_video))

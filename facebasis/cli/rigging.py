@@ -41,10 +41,13 @@ def cmd_transfer(args) -> int:
         result = dt.transfer()
     seconds = time.perf_counter() - t0
     with atomic_directory(args.out) as stage:
-        write_shapes(stage, result)
+        missing = write_shapes(stage, result, layout=template.layout)
         if contact is not None:
             _write_contact(stage, contact)
     print(f"transferred {result.n_shapes} shapes onto {args.target} in {seconds:.3f} s -> {args.out}")
+    if missing:
+        print(f"note: the template names {', '.join(missing)}, not found beside {args.template}: not copied",
+              file=sys.stderr)
     if contact is not None:
         print(contact.table())
         return _contact_verdict(contact, "transferred", args.contact_exclude)
@@ -335,13 +338,38 @@ def cmd_verify(args) -> int:
     return 0
 
 
-def cmd_export(args) -> int:
-    from ..geometry.gltf import write_glb
-    from ..geometry.rig import load_rig_folder
+def _gltf_buffer(args) -> list:
+    """``export --out X.gltf`` also writes ``X.bin`` beside it."""
+    out = Path(args.out)
+    return [(str(out.with_suffix(".bin")), "file", "--out (its .bin)")] if out.suffix.lower() == ".gltf" else []
 
-    rig = load_rig_folder(args.rig, args.neutral, args.exclude)
-    out = write_glb(rig, args.out)
-    print(f"{rig.n_shapes} morph targets, {rig.n_vertices} vertices -> {out}")
+
+def cmd_export(args) -> int:
+    from ..geometry.gltf import check_gltf_path, unit_scale, write_glb
+    from ..geometry.rig import load_rig_folder, rig_folder_warning
+
+    if args.template is not None and args.rig is not None:
+        from ..errors import InputError
+
+        raise InputError(f"export: expected the rig folder once, found {args.rig} and --template {args.template}")
+    folder = args.rig if args.rig is not None else args.template
+    if folder is None:
+        from ..errors import InputError
+
+        raise InputError("export: expected a rig folder (RIG_DIR or --template), found none")
+    unit_scale(args.unit)
+    check_gltf_path(args.out)
+    rig = load_rig_folder(folder, args.neutral, args.exclude)
+    warning = rig_folder_warning(rig)
+    if warning:
+        print(warning, file=sys.stderr)
+    t0 = time.perf_counter()
+    out = write_glb(rig, args.out, unit=args.unit)
+    layout = rig.layout
+    what = ("" if layout is None else
+            f", UVs {'yes' if layout.uv is not None else 'no'}, {max(len(layout.material_names), 1)} material(s)")
+    print(f"{rig.n_shapes} morph targets, {rig.n_vertices} vertices{what}, {args.unit} -> metres, written in "
+          f"{time.perf_counter() - t0:.3f} s -> {out}")
     return 0
 
 
@@ -464,12 +492,22 @@ def register(sub) -> None:
                                    reads=("template", "target", "examples", "weights", "resume"),
                                    derived=lambda a: _edges_file(a) + _resumed_run_inputs(a), allow=("resume",)))
 
-    p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb) with one morph target per shape")
-    p.add_argument("rig", help="rig folder (neutral + one mesh per blendshape), e.g. a facebasis rig output")
-    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the folder (default neutral.obj)")
-    p.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="ignore matching files")
-    p.add_argument("--out", required=True, help="output .glb")
-    p.set_defaults(func=cmd_export, outputs=Outputs(writes=(("out", "file", "--out"),), reads=("rig",)))
+    p = sub.add_parser("export", help="a rig folder as glTF 2.0 (.glb or .gltf) with one morph target per shape")
+    p.add_argument("rig", nargs="?", default=None,
+                   help="rig folder (neutral + one mesh per blendshape), e.g. a facebasis rig output")
+    p.add_argument("--template", default=None, metavar="RIG_DIR", help="the rig folder, spelled as transfer spells it")
+    p.add_argument("--neutral", default="neutral.obj",
+                   help="file name of the neutral inside the rig folder (default neutral.obj)")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+    p.add_argument("--unit", default="cm", metavar="cm|m|mm",
+                   help="the rig's length unit (default cm: ICT-FaceKit and the built-in face); glTF is written in "
+                        "metres and the unit recorded in asset.extras")
+    p.add_argument("--out", required=True,
+                   help="output .glb (binary glTF) or .gltf (JSON, with OUT.bin and the textures beside it); the "
+                        "folder must exist")
+    p.set_defaults(func=cmd_export, outputs=Outputs(writes=(("out", "file", "--out"),), reads=("rig", "template"),
+                                                    also=_gltf_buffer))
 
     p = sub.add_parser("verify", help="certify the stored weights of a facebasis rig output folder")
     p.add_argument("run_dir", help="output folder of facebasis rig (with inputs.json)")

@@ -11,11 +11,12 @@ meshio      OBJ/PLY reading and writing (atomic), "read a mesh in a reference's 
 gradients   triangle frames and deformation gradients, the frame-to-edge operator
 laplacian   the cotangent Laplace-Beltrami operator and lumped mass (planar or spatial meshes)
 obj         the vectorised OBJ reader and writer
+objlayout   an OBJ's own layout (vt/vn, materials, groups, polygons) kept in the meshes written in its topology
 numtext     decimal text to and from arrays, exact and loop-free (the OBJ reader's and writer's kernels)
 poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders
-gltf        a rig as glTF 2.0 binary with one morph target per shape
+gltf        a rig as glTF 2.0 (.glb/.gltf, metres, normals, UVs, materials) with one morph target per shape
 rigid       similarity alignment of a template to a scan (landmarks, or orientation search + trimmed ICP)
 nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closest points on a scan
 registration  scans of any topology to meshes in the template's topology (rigid + non-rigid ICP)

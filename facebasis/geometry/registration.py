@@ -312,13 +312,15 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     -------
     summary : dict with one report per scan, in registration order
     """
-    from ..atomic import atomic_directory, atomic_write_json
+    from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
     from .meshio import read_mesh, write_mesh
+    from .objlayout import copy_side_files, read_obj_layout
 
     log = log or (lambda *a: None)
     src = Path(scan_or_dir)
     files = _scan_files(src)
     T_V, T_F = read_mesh(template)
+    layout = read_obj_layout(template)  # UVs, materials, polygons of an OBJ template, kept in the outputs
     t_lm = s_lm = None
     if landmarks is not None:
         s_path, t_path = landmarks
@@ -366,7 +368,10 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             res = reg.register(V, F, lm, start=start, name=str(p))
             if k == 0 and len(scans) > 1:
                 start = res.vertices
-            write_mesh(stage / f"{p.stem}.obj", res.vertices, reg.F)
+            if layout is not None and layout.matches(len(res.vertices), reg.F):
+                atomic_write_bytes(stage / f"{p.stem}.obj", layout.obj_bytes(res.vertices))
+            else:
+                write_mesh(stage / f"{p.stem}.obj", res.vertices, reg.F)
             rep = {"scan": str(p), "scan_vertices": int(len(V)), "template": str(template),
                    "started_from": "template" if (k == 0 or len(scans) == 1) else f"{scans[0][0].stem}.obj",
                    **res.report()}
@@ -376,5 +381,6 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
                 f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
                 f"{rep['iterations']} iterations, {rep['seconds']:.1f} s")
+        copy_side_files(layout, stage)
         atomic_write_json(stage / "summary.json", summary)
     return summary

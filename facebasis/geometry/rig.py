@@ -22,6 +22,7 @@ from ..atomic import atomic_directory
 from ..errors import RigError, TopologyError
 from .meshio import MESH_SUFFIXES, read_mesh, read_mesh_like, write_mesh
 from .mesh import validate_mesh, validate_vertices
+from .objlayout import read_obj_layout
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,8 @@ class Rig:
     faces : (m, 3) int64
     names : tuple of k shape names
     deltas : (k, n, 3) float64, ``S_i - S0`` for each shape
+    source : where the rig came from (for messages)
+    layout : the template OBJ's layout, or None (see :mod:`facebasis.geometry.objlayout`)
     """
 
     neutral: np.ndarray
@@ -41,6 +44,9 @@ class Rig:
     names: tuple[str, ...]
     deltas: np.ndarray
     source: str = field(default="rig", compare=False)
+    #: the neutral OBJ's own layout (:class:`~facebasis.geometry.objlayout.ObjLayout`: UVs, normals,
+    #: materials, groups, polygons) for writing shapes as the template was written; None: plain
+    layout: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         V, F = validate_mesh(self.neutral, self.faces, f"{self.source} neutral")
@@ -95,7 +101,7 @@ class Rig:
 
     def with_neutral(self, neutral: np.ndarray, deltas: np.ndarray, source: str | None = None) -> "Rig":
         """A rig of the same names and faces with another neutral and deltas."""
-        return Rig(neutral, self.faces, self.names, deltas, source or self.source)
+        return Rig(neutral, self.faces, self.names, deltas, source or self.source, self.layout)
 
 
 def _matches(p: Path, glob: str) -> bool:
@@ -152,21 +158,68 @@ def load_rig_folder(
         deltas.append(V - V0)
     if not names:
         raise RigError(f"rig folder {folder}: expected blendshape meshes beside '{neutral}', found none")
-    return Rig(V0, F0, tuple(names), np.stack(deltas), source=str(folder))
+    layout = read_obj_layout(neutral_path)
+    if layout is not None and not layout.matches(len(V0), F0):
+        layout = None  # pragma: no cover - both read the same file the same way
+    return Rig(V0, F0, tuple(names), np.stack(deltas), source=str(folder), layout=layout)
 
 
-def write_rig_folder(out_dir: str | os.PathLike, rig: Rig, neutral_name: str | None = "neutral.obj") -> None:
-    """Write ``<shape>.obj`` (absolute positions) for every shape, plus the neutral, atomically."""
+def write_rig_folder(out_dir: str | os.PathLike, rig: Rig, neutral_name: str | None = "neutral.obj",
+                     layout=None) -> list[str]:
+    """Write ``<shape>.obj`` (absolute positions) for every shape, plus the neutral, atomically
+    (see :func:`write_shapes`); returns the side files the layout names but the template lacks."""
     with atomic_directory(out_dir) as stage:
-        write_shapes(stage, rig, neutral_name)
+        return write_shapes(stage, rig, neutral_name, layout)
 
 
-def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj") -> None:
-    """Write a rig's meshes into an existing (staging) folder."""
-    if neutral_name:
+def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj", layout=None) -> list[str]:
+    """Write a rig's meshes into an existing (staging) folder.
+
+    With a layout (``layout``, else the rig's own, :attr:`Rig.layout`) of the rig's topology every
+    OBJ is the template's file with its positions (and normals) replaced, and the template's MTL
+    files and textures are copied beside them (:mod:`facebasis.geometry.objlayout`); without one
+    the plain ``v``/``f`` OBJ of :func:`~facebasis.geometry.obj.obj_bytes`. Returns the MTL files
+    and textures the template names but lacks (nothing to copy)."""
+    from ..atomic import atomic_write_bytes
+    from .objlayout import copy_side_files
+
+    layout = layout if layout is not None else rig.layout
+    if layout is not None and not layout.matches(rig.n_vertices, rig.faces):
+        layout = None  # another topology: plain files
+    if layout is None:
+        if neutral_name:
+            write_mesh(stage / neutral_name, rig.neutral, rig.faces)
+        for name, d in zip(rig.names, rig.deltas):
+            write_mesh(stage / f"{name}.obj", rig.neutral + d, rig.faces)
+        return []
+    if neutral_name and not neutral_name.lower().endswith(".obj"):
         write_mesh(stage / neutral_name, rig.neutral, rig.faces)
+    elif neutral_name:
+        atomic_write_bytes(stage / neutral_name, layout.obj_bytes(rig.neutral))
     for name, d in zip(rig.names, rig.deltas):
-        write_mesh(stage / f"{name}.obj", rig.neutral + d, rig.faces)
+        atomic_write_bytes(stage / f"{name}.obj", layout.obj_bytes(rig.neutral + d))
+    return copy_side_files(layout, stage)
+
+
+#: more shapes than a facial expression rig usually has (ARKit: 52, ICT: 53; FACS-based rigs ~100)
+MANY_SHAPES = 100
+
+
+def rig_folder_warning(rig: Rig, option: str = "--exclude") -> str | None:
+    """A one-line warning when a rig folder looks as it ships rather than as a rig: shape names
+    like identity modes (``identity000``, ICT-FaceKit's FaceXModel) or more than :data:`MANY_SHAPES`
+    shapes; None otherwise."""
+    import re
+
+    ident = [s for s in rig.names if re.fullmatch(r"(?i)(identity|id|pca|mode)[_-]?\d+", s)]
+    if ident:
+        shown = ", ".join(ident[:3]) + (f", ... ({len(ident)} in all)" if len(ident) > 3 else "")
+        return (f"warning: {rig.source}: {len(ident)} shapes look like identity modes ({shown}), not expressions; "
+                f"leave them out with {option} 'identity*'")
+    if rig.n_shapes > MANY_SHAPES:
+        return (f"warning: {rig.source}: {rig.n_shapes} shapes, more than a facial expression rig usually has "
+                f"({MANY_SHAPES}); leave shapes out with {option} GLOB")
+    return None
 
 
 def load_target_neutral(path: str | os.PathLike, template: Rig) -> np.ndarray:

@@ -190,7 +190,8 @@ class DeformationTransfer:
             out[s:s + step] = self.solve_frame_deltas(self.transferred_frame_deltas(D, frame_deltas=dA),
                                                       self.anchor_values(D), self.virtual_edge_cols(D, frame_deltas=dA))
         return Rig(self.target_neutral, self.template.faces,
-                   tuple(self.template.names[i] for i in idx), out, source="deformation transfer")
+                   tuple(self.template.names[i] for i in idx), out, source="deformation transfer",
+                   layout=self.template.layout)
 
 
 def deformation_transfer(template: Rig, target_neutral: np.ndarray, anchors=None, virtual_edges=None,

@@ -106,16 +106,22 @@ def _default_face_mesh():
     return rig.neutral, rig.faces, face_landmarks()
 
 
-def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> dict:
+def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, unit: str = "cm") -> dict:
     """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
-    (T, n, 3), faces), ``animation.glb`` (see :meth:`MeshDriver.morph_basis`) and ``summary.json``."""
+    (T, n, 3), faces), ``animation.glb`` (morph targets over a PCA basis of the motion,
+    :func:`.animation.compact_vertex_animation`, in metres from the mesh's ``unit``, with an OBJ
+    mesh's UVs and materials) and ``summary.json``."""
+    from ..geometry.gltf import unit_scale
     from ..geometry.meshio import read_mesh
-    from .animation import animated_glb_bytes, frame_times
+    from ..geometry.objlayout import read_obj_layout
+    from .animation import frame_times, vertex_animation_glb_bytes
     from .drive3d import MeshDriver
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
+    unit_scale(unit)                                  # a bad --unit: said before any work
     cap = read_capture(capture_dir)
+    layout = None
     if mesh is None:
         V, F, idx = _default_face_mesh()
         if landmarks is not None:
@@ -126,6 +132,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
             raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
                              f"found none")
         V, F = read_mesh(mesh)
+        layout = read_obj_layout(mesh)
         idx = read_indices(landmarks)
         name = str(mesh)
     idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
@@ -133,18 +140,20 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
     t0 = time.perf_counter()
     driver = MeshDriver(V, F, idx, cap.landmarks[0], cap.vertices[0], cap.faces)
     anim = driver.run(cap.landmarks, cap.fps)
-    targets, names, weights = driver.morph_basis(cap.landmarks)
-    glb_error = driver.morph_error(cap.landmarks, targets, weights)
+    glb, motion = vertex_animation_glb_bytes(V, F, anim.vertices, frame_times(cap.n_frames, cap.fps), unit=unit,
+                                             layout=layout)
+    glb_error, names = motion.max_error, motion.names
     _log(log, f"mesh: {name}, {len(V)} vertices; {cap.n_frames} frames; eq. 13 scale {driver.scale:.4g}; "
               f"factorised in {driver.setup_seconds:.2f} s; animation: {len(names)} morph targets "
-              f"(largest vertex error {glb_error:.3g} mesh units)")
+              f"(PCA basis of {motion.rank}; largest vertex error {glb_error:.3g} mesh units, bound "
+              f"{motion.tolerance:.3g})")
     with atomic_directory(out_dir) as stage:
         np.savez(stage / "frames.npz", vertices=anim.vertices.astype(np.float32), faces=anim.faces,
                  indices=idx, fps=np.float64(cap.fps))
-        atomic_write_bytes(stage / "animation.glb",
-                           animated_glb_bytes(V, F, targets, names, frame_times(cap.n_frames, cap.fps), weights))
+        atomic_write_bytes(stage / "animation.glb", glb)
         summary = {"frames": cap.n_frames, "fps": cap.fps, "vertices": len(V), "scale_eq13": driver.scale,
                    "morph_targets": len(names), "animation_max_vertex_error": glb_error,
+                   "animation_error_bound": motion.tolerance, "animation_basis": motion.rank,
                    "seconds": time.perf_counter() - t0,
                    "z": "unchanged (monocular capture: in-plane motion only)"}
         atomic_write_json(stage / "summary.json", summary)
@@ -200,15 +209,19 @@ def pose_csv(result) -> bytes:
     return buf.getvalue().encode()
 
 
-def write_retarget_outputs(stage: Path, rig, result, pairs_named, extra: dict | None = None) -> dict:
-    """``weights.csv``, ``weights.json``, ``pose.csv``, ``animation.glb``, ``summary.json`` into ``stage``."""
+def write_retarget_outputs(stage: Path, rig, result, pairs_named, extra: dict | None = None, *,
+                           animate_pose: bool = True, unit: str = "cm") -> dict:
+    """``weights.csv``, ``weights.json``, ``pose.csv``, ``animation.glb``, ``summary.json`` into ``stage``;
+    ``animation.glb`` animates the head pose beside the weights unless ``animate_pose`` is False, in
+    metres from the rig's ``unit``."""
     from .animation import write_rig_animation
 
     atomic_write_bytes(stage / "weights.csv", weights_csv(result.names, result.weights))
     atomic_write_json(stage / "weights.json", {"fps": result.fps, "names": list(result.names),
                                                "weights": np.round(result.weights, 6).tolist()})
     atomic_write_bytes(stage / "pose.csv", pose_csv(result))
-    write_rig_animation(stage / "animation.glb", rig, np.clip(result.weights, 0.0, 1.0), result.fps)
+    write_rig_animation(stage / "animation.glb", rig, np.clip(result.weights, 0.0, 1.0), result.fps, unit=unit,
+                        pose=(result.scale, result.rotation, result.translation) if animate_pose else None)
     summary = {"frames": result.n_frames, "fps": result.fps, "shapes": rig.n_shapes,
                "exclusive": [f"{a}:{b}" for a, b in pairs_named],
                "residual_px_mean": float(np.nanmean(result.residual)),
@@ -243,16 +256,21 @@ FIRST_FRAME_HINT = 0.03
 
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
-                 identity: str | None = None, log=None) -> dict:
+                 identity: str | None = None, log=None, animate_pose: bool = True, unit: str = "cm") -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
+
+    ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
+    in metres from the rig's ``unit`` (``cm``, ``m`` or ``mm``).
 
     ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
     (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
     """
     from ..rigging.examples import parse_pairs
+    from ..geometry.gltf import unit_scale
     from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
+    unit_scale(unit)                                  # a bad --unit: said before any work
     ridge = _parse_ridge(ridge)
     if identity is not None and not isinstance(identity, str):
         raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
@@ -296,7 +314,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                       "rig's, or its landmarks are defined differently); --identity auto (the default) estimates "
                       "the person's neutral from the capture, --identity first-frame takes frame 0 as it")
     with atomic_directory(out_dir) as stage:
-        summary = write_retarget_outputs(stage, r, result, named, extra)
+        summary = write_retarget_outputs(stage, r, result, named, extra, animate_pose=animate_pose, unit=unit)
     return summary
 
 

@@ -43,7 +43,7 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
     from .verify import write_inputs
 
     folder = Path(folder)
-    write_shapes(folder, result.rig)
+    write_shapes(folder, result.rig, layout=getattr(problem.template, "layout", None))
     names = problem.example_names
     atomic_write_json(folder / "weights.json", weights_to_json(result.weights, names, problem.template.names))
     history = history_to_json(result, options, problem)
@@ -59,7 +59,7 @@ def write_rig_run(folder, result, options, problem, examples_dir, weights_file, 
     cv = getattr(result, "crossval", None)
     if cv is not None:
         atomic_write_json(folder / CROSSVAL_FILE, cv.to_json())
-    write_glb(result.rig, folder / "rig.glb")
+    write_glb(result.rig, folder / "rig.glb", layout=getattr(problem.template, "layout", None))
     return history
 
 

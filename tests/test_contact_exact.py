@@ -245,6 +245,36 @@ def test_pairs_intersecting_in_the_target_neutral_stay_allowed():
     assert res.ok and new_count(rig, target, res.rig.deltas, res.rig.names) == [0, 0]
 
 
+def test_transfer_contact_keeps_a_targets_own_intersections_by_default(tmp_path, capsys):
+    """A target neutral that intersects itself (as scans and sculpted heads often do): by default its
+    pairs are kept as they are, one line says how many and where, and no new pair appears; with
+    --contact-strict the target is refused before any solving."""
+    from facebasis.cli import main
+    from facebasis.geometry.meshio import read_mesh, write_mesh
+    from facebasis.geometry.rig import write_rig_folder
+
+    rig = two_sheets()
+    target = stretched(rig.neutral)
+    corner = np.flatnonzero((target[:, 0] < 0.5) & (target[:, 1] > 1.0) & (target[:, 1] < 2.2) & (target[:, 2] > 0.1))
+    target[corner, 2] = -0.2
+    write_rig_folder(tmp_path / "rig", rig)
+    write_mesh(tmp_path / "target.obj", target, rig.faces)
+    target = read_mesh(tmp_path / "target.obj")[0]  # as the command reads them (10 decimals)
+    own = new_pairs(target, rig.faces, (read_mesh(tmp_path / "rig" / "neutral.obj")[0],))
+    assert len(own) > 0
+    argv = ["transfer", "--template", str(tmp_path / "rig"), "--target", str(tmp_path / "target.obj"), "--contact"]
+    assert main(argv + ["--contact-strict", "--out", str(tmp_path / "strict")]) == 2
+    assert "expected no intersecting triangle pairs beyond the template neutral's" in capsys.readouterr().err
+    assert not (tmp_path / "strict").exists()
+    assert main(argv + ["--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    said = [line for line in err.splitlines() if line.startswith("contact: the target neutral")]
+    assert len(said) == 1 and f"in {len(own)} triangle pair(s)" in said[0] and "kept as they are" in said[0]
+    names = [n for n in rig.names]
+    deltas = np.stack([read_mesh(tmp_path / "out" / f"{n}.obj")[0] - target for n in names])
+    assert new_count(rig, target, deltas, names) == [0] * len(names)
+
+
 def test_errors():
     rig = two_sheets()
     with pytest.raises(InputError, match=r"contact exclude: expected shape names of the template .*found unknown 'nope'"):
@@ -385,10 +415,15 @@ def test_rig_cli_contact_bad_inputs(tmp_path, capsys, monkeypatch):
     write_mesh(root / "closed.obj", pp.problem.target_neutral - 0.5 * jaw, pp.problem.template.faces)
     base = ["rig", "--template", str(root / "template"), "--examples", str(root / "examples"), "--weights",
             str(root / "weights.json"), "--iterations", "1", "--out", str(tmp_path / "out")]
-    assert main(base + ["--target", str(root / "closed.obj"), "--contact"]) == 2
+    assert main(base + ["--target", str(root / "closed.obj"), "--contact", "--contact-strict"]) == 2
     err = capsys.readouterr().err
     assert "closed.obj: expected no intersecting triangle pairs beyond the template neutral's, found" in err
-    assert "(triangles (" in err and "--contact-allow-target-pairs" in err
+    assert "(triangles (" in err
+    assert main(base + ["--target", str(root / "closed.obj"), "--contact", "--contact-strict",
+                        "--contact-allow-target-pairs"]) == 2
+    assert "--contact-strict: expected it or --contact-allow-target-pairs, found both" in capsys.readouterr().err
+    assert main(base + ["--target", str(root / "target.obj"), "--contact-strict"]) == 2
+    assert "expected --contact as well" in capsys.readouterr().err
     assert main(base + ["--target", str(root / "target.obj"), "--contact-allow-target-pairs"]) == 2
     assert "expected --contact as well" in capsys.readouterr().err
     monkeypatch.setattr(exact, "MAX_VERTICES", 1000)

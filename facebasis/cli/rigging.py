@@ -22,10 +22,7 @@ def cmd_transfer(args) -> int:
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact:  # names, size and the target's own intersections, before any solving (as rig does)
-        from ..contact.exact import check_contact_inputs
-
-        check_contact_inputs(template, target, args.contact_exclude, args.contact_allow_target_pairs,
-                             what="--contact", exclude_what="--contact-exclude", target_what=str(args.target))
+        _check_contact_target(args, template, target)
     ve = virtual_edges_for(args, template)
     t0 = time.perf_counter()
     dt = DeformationTransfer(template, target, virtual_edges=ve, virtual_weight=args.virtual_weight,
@@ -75,13 +72,42 @@ def _cv_grid(values) -> tuple[float, ...]:
     return tuple(_once(out, "--cv-grid"))
 
 
+def add_contact_target_args(p) -> None:
+    """``--contact-strict`` / ``--contact-allow-target-pairs`` (transfer and rig, declared once)."""
+    p.add_argument("--contact-strict", action="store_true",
+                   help="with --contact: refuse a target neutral that intersects itself where the template does not "
+                        "(by default those pairs are kept as they are, said in one line, and no new pair appears)")
+    p.add_argument("--contact-allow-target-pairs", action="store_true",
+                   help="with --contact: keep the target neutral's own intersections (the default now; the flag "
+                        "is kept for older scripts)")
+
+
 def _check_contact_flags(args) -> None:
     """The contact flags of transfer and rig: the others need ``--contact``; names given twice kept once."""
     from ..errors import InputError
 
-    if not args.contact and (args.contact_exclude or args.contact_allow_target_pairs):
-        raise InputError("--contact-exclude / --contact-allow-target-pairs: expected --contact as well, found none")
+    given = [flag for flag, v in (("--contact-exclude", args.contact_exclude), ("--contact-strict", args.contact_strict),
+                                  ("--contact-allow-target-pairs", args.contact_allow_target_pairs)) if v]
+    if not args.contact and given:
+        raise InputError(f"{', '.join(given)}: expected --contact as well, found none")
+    if args.contact_strict and args.contact_allow_target_pairs:
+        raise InputError("--contact-strict: expected it or --contact-allow-target-pairs, found both (strict refuses "
+                         "the target's own intersections, the other keeps them)")
     args.contact_exclude = _once(args.contact_exclude, "--contact-exclude")
+    args.contact_allow_target_pairs = not args.contact_strict  # the target's own intersections are kept by default
+
+
+def _check_contact_target(args, template, target) -> None:
+    """Names, size and the target neutral's own intersections, before any solving; those are kept as
+    they are (one line says how many and where) unless ``--contact-strict`` refuses the target."""
+    from ..contact.exact import check_contact_inputs, describe_target_pairs
+
+    own = check_contact_inputs(template, target, args.contact_exclude, args.contact_allow_target_pairs,
+                               what="--contact", exclude_what="--contact-exclude", target_what=str(args.target))
+    if len(own):
+        print(f"contact: the target neutral {args.target} intersects itself beyond the template neutral in "
+              f"{describe_target_pairs(own, target, template.faces)}: kept as they are, no new pair is allowed "
+              "(--contact-strict refuses such a target)", file=sys.stderr)
 
 
 def _once(values, flag: str) -> list:
@@ -154,7 +180,7 @@ def cmd_rig(args) -> int:
     from ..rigging.runs import write_rig_run
 
     if args.resume is not None:
-        if args.contact or args.contact_exclude or args.contact_allow_target_pairs:
+        if args.contact or args.contact_exclude or args.contact_allow_target_pairs or args.contact_strict:
             raise InputError("--contact with --resume: expected a fresh run (contact is not stored in a run "
                              "to resume), found --resume")
         return _cmd_rig_resume(args)
@@ -168,10 +194,7 @@ def cmd_rig(args) -> int:
     template = load_rig_folder(args.template, args.neutral, args.exclude)
     target = load_target_neutral(args.target, template)
     if args.contact:
-        from ..contact.exact import check_contact_inputs
-
-        check_contact_inputs(template, target, args.contact_exclude, args.contact_allow_target_pairs,
-                             what="--contact", exclude_what="--contact-exclude", target_what=str(args.target))
+        _check_contact_target(args, template, target)
     names, examples = load_examples(args.examples, template)
     X0 = load_weights(args.weights, names, template.names)
     ve = virtual_edges_for(args, template)
@@ -428,9 +451,7 @@ def register(sub) -> None:
     p.add_argument("--contact-exclude", action="extend", nargs="+", default=[], metavar="SHAPE",
                    help="with --contact: shapes left as plain transfer, e.g. correctives meant to press layers "
                         "together (several after one flag or repeated)")
-    p.add_argument("--contact-allow-target-pairs", action="store_true",
-                   help="with --contact: accept a target neutral that intersects itself where the template does "
-                        "not (those pairs stay allowed); without it that is an error naming the pairs")
+    add_contact_target_args(p)
     p.set_defaults(func=cmd_transfer, outputs=Outputs(writes=(("out", "folder", "--out"),),
                                                      reads=("template", "target"), derived=_edges_file))
 
@@ -459,9 +480,7 @@ def register(sub) -> None:
     p.add_argument("--contact-exclude", action="extend", nargs="+", default=[], metavar="SHAPE",
                    help="with --contact: shapes left as generated, e.g. correctives meant to press layers together "
                         "(several after one flag or repeated)")
-    p.add_argument("--contact-allow-target-pairs", action="store_true",
-                   help="with --contact: accept a target neutral that intersects itself where the template does "
-                        "not (those pairs stay allowed); without it that is an error naming the pairs")
+    add_contact_target_args(p)
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
                    help="mutually exclusive shape pairs (complementarity x_a x_b = 0); give several after one "
                         "flag (--exclusive A:B C:D) or repeat the flag; every pair is kept")

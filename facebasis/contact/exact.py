@@ -90,16 +90,33 @@ def check_target_neutral(target, template: Rig, allow: bool = False, what: str =
 
 def check_contact_inputs(template: Rig, target_neutral, exclude=(), allow_target_pairs: bool = False, *,
                          what: str = "contact", exclude_what: str | None = None,
-                         target_what: str = "target neutral") -> None:
+                         target_what: str = "target neutral") -> np.ndarray:
     """What exact contact needs, checked before any solving (``rig --contact`` and
     ``generate_blendshapes(contact=True)``): known shape names in ``exclude``, a mesh within the time
     budget (:func:`check_size`), and a target neutral (n, 3) that does not intersect itself beyond
     the template neutral unless ``allow_target_pairs`` (:func:`check_target_neutral`). Messages name
-    ``exclude_what`` (default ``<what>_exclude``), ``what`` and ``"<what>: <target_what>"``."""
+    ``exclude_what`` (default ``<what>_exclude``), ``what`` and ``"<what>: <target_what>"``. Returns
+    the target's own intersecting pairs (q, 2) beyond the template neutral's (allowed ones)."""
     if exclude:
         template.index(list(exclude), what=exclude_what or f"{what}_exclude")
     check_size(template.n_vertices, what=what)
-    check_target_neutral(target_neutral, template, allow_target_pairs, what=f"{what}: {target_what}")
+    return check_target_neutral(target_neutral, template, allow_target_pairs, what=f"{what}: {target_what}")
+
+
+def describe_target_pairs(pairs, target_neutral, faces) -> str:
+    """Where a target neutral's own intersecting triangle pairs (q, 2) lie, in one line: how many,
+    a few of them, and the box (mesh units) of the triangles involved."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    if not len(pairs):
+        return "no pairs"
+    V = np.asarray(target_neutral, np.float64)
+    P = V[np.asarray(faces)[np.unique(pairs)].ravel()]
+    lo, hi = P.min(0), P.max(0)
+    centre = ", ".join(f"{c:.3g}" for c in (lo + hi) / 2)
+    size = " x ".join(f"{c:.3g}" for c in hi - lo)
+    ex = ", ".join(f"({i}, {j})" for i, j in pairs[:3].tolist())
+    return (f"{len(pairs)} triangle pair(s) ({ex}{', ...' if len(pairs) > 3 else ''}) in a box of {size} "
+            f"around ({centre})")
 
 
 def _check_exclude(exclude, names, what: str) -> list:

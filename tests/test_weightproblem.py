@@ -205,3 +205,39 @@ def test_solvers_of_one_problem_agree():
     with pytest.raises(InputError, match=r"weight step: expected a problem of 2 examples, 7 shapes and the pairs "
                                          r"\[\[0, 1\], \[2, 3\]\], found 2, 7 and \[\[0, 1\]\]"):
         WeightSolver(p.k, p.m, p.pairs).solve_problem(WeightProblem(p.G, p.c, p.const, [(0, 1)], p.prior, p.lam))
+
+
+def test_cancel_pairs_is_provably_suboptimal_on_two_shapes():
+    """Two correlated shapes, one exclusive pair: without the pair the optimum is x = G^-1 c =
+    (0.787, 0.427); cancel-pairs zeroes the smaller x_1 and keeps x_0 = c_0 / G_00 = 1, objective
+    -c_0^2 / G_00 = -1; the optimum keeps x_1 = c_1 / G_11 = 0.525 instead, objective -1.1025."""
+    from facebasis.rigging.certify import certified_weights
+    from facebasis.rigging.formulations import cancel_pairs
+
+    G = np.array([[1.0, 0.5], [0.5, 4.0]])
+    c = np.array([1.0, 2.1])
+    problem = WeightProblem(G, c, 0.0, [(0, 1)])
+    heur = cancel_pairs(problem)
+    np.testing.assert_allclose(heur.x, [1.0, 0.0], atol=1e-12)
+    assert heur.objective == pytest.approx(-1.0, abs=1e-12) and heur.iterations == 2
+    opt = certified_weights(problem)
+    np.testing.assert_allclose(opt.x, [0.0, 0.525], atol=1e-9)
+    assert opt.objective == pytest.approx(-1.1025, abs=1e-9) and opt.objective < heur.objective - 0.1
+    assert heur.max_complementarity == 0.0 and heur.max_bound_violation == 0.0
+    free = cancel_pairs(WeightProblem(G, c, 0.0, []))  # no pairs: one exact box QP
+    np.testing.assert_allclose(free.x, np.linalg.solve(G, c), atol=1e-12)
+    with pytest.raises(InputError, match="cancel-pairs: expected one example, found 2"):
+        cancel_pairs(WeightProblem(G, np.stack([c, c]), np.zeros(2), [(0, 1)]))
+
+
+def test_an_independent_miqp_referee_agrees_on_the_closed_form_instances():
+    """Optional (never a CI dependency): Gurobi's SOS1 branch and bound, where gurobipy is installed,
+    reaches the certified optimum of every closed-form instance."""
+    pytest.importorskip("gurobipy")
+    from problems.independent import referee
+    from problems.weights_suite import closed_form_instances
+
+    rows = referee(closed_form_instances())
+    assert all(r["agree"] and r["status"] == "optimal" for r in rows), rows
+    with pytest.raises(InputError, match="--independent: expected one of gurobi, found 'cplex'"):
+        referee(closed_form_instances(), "cplex")

@@ -19,6 +19,15 @@ lambda and its own parameter, and reused for every instance of the same size and
     ``f + rho sum x_a x_b`` (only bounds as constraints), rho = 1, 10, ... until the pairs hold to
     1e-9 or rho = 1e8 (an exact penalty for MPCCs, Ralph & Wright 2004).
 
+Beside them, the heuristic production facial solvers use (:func:`cancel_pairs`):
+
+``cancel-pairs``
+    Solve without the pairs (an exact box QP), then for every pair with both weights positive set
+    the smaller one to zero (held at 0 from then on) and solve again, until no pair is violated
+    (NVIDIA Audio2Face-3D's blendshape solver cancels pairs this way, with one re-solve). Always
+    feasible, never better than the optimum, and provably suboptimal when the smaller weight of a
+    pair is the one that should stay (see the test on two shapes).
+
 The certified optimum from :func:`facebasis.rigging.certify.certified_weights` is the yardstick;
 objectives and residuals of every answer come from its
 :class:`~facebasis.rigging.weightproblem.WeightProblem`.
@@ -42,6 +51,8 @@ from .weightproblem import ExampleResiduals, WeightProblem, check_pairs
 from .weights import IPOPT_OK
 
 FORMULATIONS = ("equality", "inequality", "scholtes", "penalty")
+#: methods that are not IPOPT formulations (compared with them by :func:`compare_formulations`)
+HEURISTICS = ("cancel-pairs",)
 SCHOLTES_EPS = tuple(10.0 ** -e for e in range(1, 9))
 PENALTY_RHO = tuple(10.0 ** e for e in range(0, 9))
 
@@ -141,12 +152,53 @@ class FormulationSolver:
         return FormulationResult(self.formulation, problem, x, tuple(statuses), iters, time.perf_counter() - t0)
 
 
-__all__ = ["FORMULATIONS", "FormulationResult", "FormulationSolver"]
+def cancel_pairs(problem: WeightProblem, tol: float = 0.0) -> FormulationResult:
+    """The cancel-pairs heuristic on one example's problem (module docstring).
+
+    Each round solves the box QP ``min 1/2 x^T H x + g^T x``, ``0 <= x <= hi`` exactly
+    (:func:`facebasis.rigging.boxqp.solve_box_qp`, H and g from eq. 5 via ``problem``), then sets
+    ``hi = 0`` for the smaller weight of every pair whose product exceeds ``tol``; it ends when none
+    does (at most one round per pair, since a cancelled weight stays at 0).
+
+    Parameters
+    ----------
+    problem : WeightProblem with one example (m = 1)
+    tol : float, a pair counts as violated when ``x_a x_b > tol``
+
+    Returns
+    -------
+    FormulationResult
+        ``formulation="cancel-pairs"``, ``iterations`` = box QPs solved, one ``statuses`` entry per
+        round ("box QP optimal").
+    """
+    from .boxqp import solve_box_qp
+
+    if problem.m != 1:
+        raise InputError(f"cancel-pairs: expected one example, found {problem.m}")
+    t0 = time.perf_counter()
+    P, H, g = problem.pairs, problem.hessian, problem.linear_term(0)
+    hi = np.ones(problem.k)
+    statuses = []
+    while True:
+        x = solve_box_qp(H, g, 0.0, hi).x
+        statuses.append("box QP optimal")
+        if not len(P):
+            break
+        bad = P[x[P[:, 0]] * x[P[:, 1]] > tol]
+        if not len(bad):
+            break
+        hi[np.where(x[bad[:, 0]] <= x[bad[:, 1]], bad[:, 0], bad[:, 1])] = 0.0  # cancel the smaller weight
+    return FormulationResult("cancel-pairs", problem, x, tuple(statuses), len(statuses), time.perf_counter() - t0)
 
 
-def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 1e-6, progress=None) -> list[dict]:
-    """Solve every instance (:class:`facebasis.rigging.weightproblem.WeightInstance`) with the certified solver and
-    with each IPOPT formulation; one row per (instance, method) as plain dicts (a results table).
+__all__ = ["FORMULATIONS", "HEURISTICS", "FormulationResult", "FormulationSolver", "cancel_pairs"]
+
+
+def compare_formulations(instances, formulations=FORMULATIONS + HEURISTICS, rel_tol: float = 1e-6,
+                         progress=None) -> list[dict]:
+    """Solve every instance (:class:`facebasis.rigging.weightproblem.WeightInstance`) with the certified solver,
+    each IPOPT formulation and the cancel-pairs heuristic (:data:`HEURISTICS`); one row per (instance,
+    method) as plain dicts (a results table).
 
     Columns: instance, kind, method, objective, certified_objective, relative_gap (method minus
     certified, over max(1, |certified|)), reached (|gap| <= rel_tol), max_complementarity,
@@ -161,10 +213,13 @@ def compare_formulations(instances, formulations=FORMULATIONS, rel_tol: float = 
                      "max_complementarity": cs.max_complementarity, "max_bound_violation": cs.max_bound_violation,
                      "seconds": cs.seconds, "statuses": "", "iterations": 0, "nodes": cs.nodes})
         for form in formulations:
-            key = (form, inst.k, inst.pairs.tobytes())
-            if key not in solvers:
-                solvers[key] = FormulationSolver(inst.k, inst.pairs, form)
-            r = solvers[key].solve_problem(inst.problem)
+            if form == "cancel-pairs":
+                r = cancel_pairs(inst.problem)
+            else:
+                key = (form, inst.k, inst.pairs.tobytes())
+                if key not in solvers:
+                    solvers[key] = FormulationSolver(inst.k, inst.pairs, form)
+                r = solvers[key].solve_problem(inst.problem)
             gap = (r.objective - cs.objective) / max(1.0, abs(cs.objective))
             rows.append({**base, "method": form, "objective": r.objective, "relative_gap": gap,
                          "reached": abs(gap) <= rel_tol, "max_complementarity": r.max_complementarity,

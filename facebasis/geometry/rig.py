@@ -157,7 +157,9 @@ def load_rig_folder(
                        f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})")
     V0, F0 = read_mesh(neutral_path, check_degenerate=True)
     names, deltas = [], []
-    for p in every:
+    from ..progress import progress
+
+    for p in progress(every, desc=f"reading {folder}"):
         if any(_matches(p, g) for g in exclude) or p.resolve() == neutral_path.resolve():
             continue
         V = read_mesh_like(p, len(V0), F0, str(neutral_path))
@@ -176,9 +178,11 @@ def write_rig_folder(out_dir: str | os.PathLike, rig: Rig, neutral_name: str | N
 
 def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj") -> None:
     """Write a rig's meshes into an existing (staging) folder."""
+    from ..progress import progress
+
     if neutral_name:
         write_mesh(stage / neutral_name, rig.neutral, rig.faces)
-    for name, d in zip(rig.names, rig.deltas):
+    for name, d in progress(zip(rig.names, rig.deltas), total=rig.n_shapes, desc="writing shapes"):
         write_mesh(stage / f"{name}.obj", rig.neutral + d, rig.faces)
 
 

@@ -35,7 +35,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     faces), ``cartoon_rest.png`` and ``summary.json``.
     """
     from .files import read_image, read_points2d
-    from .media import read_video_frames, side_by_side, write_gif, write_mp4
+    from .media import check_video, read_video_frames, side_by_side, write_gif, write_mp4
     from .warp2d import CartoonAnimator
 
     cap = read_capture(capture_dir)
@@ -63,11 +63,13 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
               f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}")
     overlay = Path(capture_dir) / OVERLAY_FILE  # the source video, or else the capture's overlay of it
     video = cap.video if cap.video is not None else (overlay if overlay.is_file() else None)
+    if video is not None:
+        check_video(video, f"capture {capture_dir}: its video")
     gif_frames, warp_seconds = [], 0.0
 
     def frames():
         nonlocal warp_seconds
-        src = read_video_frames(video) if video is not None else None
+        src = read_video_frames(video, what=f"capture {capture_dir}: its video") if video is not None else None
         for f in range(cap.n_frames):
             t1 = time.perf_counter()
             out = anim.warp(meshes[f])

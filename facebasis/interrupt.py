@@ -110,12 +110,37 @@ def interruptible() -> Iterator[None]:
 @contextlib.contextmanager
 def deferred_interrupts() -> Iterator[None]:
     """Hold the stop signals (SIGINT, SIGTERM, SIGHUP) back while the block runs (a few renames that
-    must not be cut in half); one that arrived meanwhile is delivered when the block ends."""
+    must not be cut in half); one that arrived meanwhile is delivered when the block ends.
+
+    The signals' handlers are swapped for one that only records them (a signal mask would not do:
+    it holds a signal back from this thread only, and the kernel hands a process's signal to any
+    other thread that does not block it, a BLAS or tqdm thread, whose Python handler then runs in
+    the main thread at once). A signal whose action was the default (SIGTERM outside the command
+    line) is sent again with that action once the block ends; an ignored one stays ignored.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, set(STOP_SIGNALS))
+    seen = []
+    previous = {}
+
+    def record(signum, frame):
+        seen.append(signum)
+
     try:
+        for sig in STOP_SIGNALS:
+            h = signal.getsignal(sig)
+            if h not in (signal.SIG_IGN, None):
+                previous[sig] = h
+                signal.signal(sig, record)
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for sig, h in previous.items():
+            signal.signal(sig, h)
+        if seen:  # delivered now, also when the block raised (the interrupt then carries that error)
+            first = seen[0]
+            h = previous[first]
+            if callable(h):
+                h(first, None)
+            else:  # the default action (end the process), as if the signal came now
+                os.kill(os.getpid(), first)

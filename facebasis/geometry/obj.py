@@ -102,11 +102,8 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raw = Path(path).read_bytes()
     except OSError as exc:
         raise MeshError(f"{name}: expected a readable OBJ file, found {exc.strerror or exc}") from None
-    zero = raw.find(b"\0")  # memchr: OBJ is text; a zero byte (a binary file, a sparse file's hole, a file
-    if zero >= 0:           # cut by a crash) would otherwise be parsed at length into "found 0 vertices"
-        line = raw.count(b"\n", 0, zero) + 1
-        raise MeshError(f"{name}: expected OBJ text, found a zero byte at byte {zero:,} (line {line}): binary "
-                        "data or a damaged file")
+    _refuse_zero_byte(raw, name)  # memchr: OBJ is text; a zero byte (a binary file, a sparse file's hole, a
+    # file cut by a crash) would otherwise be parsed at length into "found 0 vertices"
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         raise MeshError(f"{name}: expected an ASCII/UTF-8 OBJ file, found UTF-16 text (byte-order mark)")
     if raw.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (Windows editors) is not data
@@ -130,6 +127,14 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 SNIFF_BYTES = 1 << 16
 
 
+def _refuse_zero_byte(data: bytes, name: str) -> None:
+    zero = data.find(b"\0")
+    if zero >= 0:
+        line = data.count(b"\n", 0, zero) + 1
+        raise MeshError(f"{name}: expected OBJ text, found a zero byte at byte {zero:,} (line {line}): binary "
+                        "data or a damaged file")
+
+
 def _sniff_text(path, name: str) -> None:
     """Refuse, before reading it, an OBJ file that cannot be text: one with a hole (a sparse file:
     its unwritten ranges read as zero bytes; found with ``SEEK_HOLE``, no data read) or a zero byte
@@ -140,10 +145,7 @@ def _sniff_text(path, name: str) -> None:
         head = fh.read(SNIFF_BYTES)
         if head.startswith((b"\xff\xfe", b"\xfe\xff")):
             raise MeshError(f"{name}: expected an ASCII/UTF-8 OBJ file, found UTF-16 text (byte-order mark)")
-        zero = head.find(b"\0")
-        if zero >= 0:
-            raise MeshError(f"{name}: expected OBJ text, found a zero byte at byte {zero:,} (binary data, "
-                            f"{size:,} bytes)")
+        _refuse_zero_byte(head, name)
         hole = size
         if hasattr(os, "SEEK_HOLE"):
             try:

@@ -44,20 +44,23 @@ def _raise_terminated(signum, frame):
     raise Terminated(signum)
 
 
-def install_stop_handlers() -> None:
+def install_stop_handlers() -> dict:
     """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (SIGINT already raises
-    ``KeyboardInterrupt``). A signal ignored at start (``nohup``, background jobs) is left ignored."""
+    ``KeyboardInterrupt``). A signal ignored at start (``nohup``, background jobs) is left ignored.
+    Returns the handlers replaced, ``{signal: handler}``, for the caller to put back."""
     if threading.current_thread() is not threading.main_thread():
-        return
+        return {}
     global _FORK_HOOK
+    replaced = {}
     for sig in STOP_SIGNALS:
         if sig == signal.SIGINT:
             continue
         if signal.getsignal(sig) == signal.SIG_DFL:
-            signal.signal(sig, _raise_terminated)
+            replaced[sig] = signal.signal(sig, _raise_terminated)
     if not _FORK_HOOK and hasattr(os, "register_at_fork"):  # a forked child (a pool worker) is ended by
         os.register_at_fork(after_in_child=_default_in_child)  # SIGTERM silently, as before
         _FORK_HOOK = True
+    return replaced
 
 
 _FORK_HOOK = False

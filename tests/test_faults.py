@@ -377,6 +377,16 @@ def test_an_out_that_is_a_dangling_or_looping_symlink_is_one_line(small, tmp_pat
         "dangling", "loop1", "loop2"]
 
 
+def test_a_closed_stdout_does_not_stop_the_command(small, tmp_path, references):
+    """`facebasis transfer ... | head -0`: the reader has gone before the command prints; the command
+    still writes its output, exits 0 and prints no BrokenPipeError."""
+    p = run_driver(tmp_path, transfer_args(small, "b", tmp_path / "out"), wait=False)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 0 and err == ""
+    assert tree(tmp_path / "out") == references["b"]
+
+
 def test_os_error_lines():
     from facebasis.cli import os_error_line
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import os
 import signal
 import sys
 from pathlib import Path
@@ -87,6 +88,8 @@ def os_error_line(exc: OSError, command: str, out=None) -> str:
                 rel = None
             if rel is not None and rel.parts and rel.parts[0].startswith(f".{o.name}."):
                 where = f"writing output {out} (staging {rel.as_posix()})"
+            elif rel is not None and rel.parts == (o.name,):
+                where = f"writing output {out}"
             elif rel is not None and rel.parts and rel.parts[0] == o.name:
                 where = f"writing output {out} ({path})"
     elif out and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS):  # only writes fail so
@@ -122,14 +125,60 @@ def _symlink_note(out) -> str:
     return ""
 
 
+class _StdoutGuard:
+    """``sys.stdout`` for a command: once the reader of a pipe has gone (``facebasis rig ... | head``),
+    further output is dropped and the command goes on to write its files, instead of dying in the
+    middle with a ``BrokenPipeError``."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._drop()
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._drop()
+
+    def _drop(self):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:  # the descriptor itself goes to /dev/null: the final flush at exit succeeds too
+            os.dup2(devnull, self._stream.fileno())
+        except (OSError, ValueError):
+            pass
+        finally:
+            os.close(devnull)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None) -> int:
     """Run one command. Exit status: 0 done, 2 an error (one ``error:`` line on stderr), 128 + the
     signal's number when stopped by SIGINT (130), SIGTERM (143) or SIGHUP (129), with one
-    ``interrupted:`` line."""
-    install_stop_handlers()
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    out = getattr(args, "out", None)
+    ``interrupted:`` line. A closed stdout (``| head``) does not stop the command."""
+    replaced = install_stop_handlers()
+    guarded = sys.stdout is sys.__stdout__ and sys.stdout is not None
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if guarded:
+            sys.stdout = _StdoutGuard(sys.stdout)
+        return _run(args, getattr(args, "out", None))
+    finally:
+        if guarded:
+            sys.stdout = sys.__stdout__
+        for sig, handler in replaced.items():  # main() called from Python: the caller's handlers back
+            signal.signal(sig, handler)
+
+
+def _run(args, out) -> int:
     try:
         return int(args.func(args) or 0)
     except FacebasisError as exc:

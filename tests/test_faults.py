@@ -408,7 +408,8 @@ def test_os_error_lines():
 def test_sigterm_swallowed_inside_the_block_is_raised_when_it_ends(own_handlers):
     from facebasis.interrupt import Terminated, deferred_interrupts, install_stop_handlers, interruptible
 
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # as in a fresh process, even under nohup
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
     install_stop_handlers()
     with pytest.raises(Terminated) as info:
         with interruptible():

@@ -178,6 +178,45 @@ def test_a_killed_transfer_leaves_the_old_output_and_the_next_run_the_new_one(sm
     assert tree(out) == references["b"] and leftovers(tmp_path, "out") == []
 
 
+@pytest.fixture(scope="module")
+def frames(tmp_path_factory):
+    from PIL import Image
+
+    from facebasis.capture.synthetic import synthetic_sequence
+    from facebasis.retarget.files import write_pts
+
+    d = tmp_path_factory.mktemp("frames")
+    seq = synthetic_sequence(4, size=(96, 96))
+    (d / "frames").mkdir()
+    for i, f in enumerate(seq.frames):
+        Image.fromarray(f).save(d / "frames" / f"f{i}.png")
+    write_pts(d / "first.pts", seq.landmarks[0])
+    return d
+
+
+@pytest.mark.parametrize("point, n, sig", [
+    ("facebasis.capture.overlay:draw_overlay", 3, "SIGTERM"),  # mid-video, the overlay being encoded
+    ("facebasis.capture.tracker:write_capture", 1, "SIGKILL"),  # the tracks about to be written
+])
+def test_a_killed_capture_leaves_the_old_output(frames, tmp_path, point, n, sig, own_handlers):
+    from facebasis.capture.trackfile import read_capture
+    from facebasis.cli import main
+
+    out = tmp_path / "cap"
+    argv = ["capture", frames / "frames", "--landmarks", frames / "first.pts", "--out", out]
+    assert main([str(a) for a in argv] + ["--max-frames", "2"]) == 0  # the old output: 2 frames
+    old = tree(out)
+    code, _, err = run_driver(tmp_path, argv, hooks=[(point, n, sig)])
+    assert code == STATUS[sig]
+    last = err.rstrip("\n").rsplit("\n", 1)[-1].rsplit("\r", 1)[-1]  # after capture's own progress bar
+    assert "Traceback" not in err and "Error" not in err, err
+    if sig != "SIGKILL":
+        assert last.startswith(f"interrupted: facebasis capture stopped by {sig}"), err
+    assert tree(out) == old
+    assert main([str(a) for a in argv]) == 0
+    assert read_capture(out).n_frames == 4 and leftovers(tmp_path, "cap") == []
+
+
 def test_a_killed_first_run_leaves_nothing(small, tmp_path):
     code, _, err = run_driver(tmp_path, transfer_args(small, "b", tmp_path / "out"),
                               hooks=[("facebasis.geometry.rig:write_mesh", 3, "SIGTERM")])
@@ -448,6 +487,42 @@ def test_signals_are_held_back_during_renames_even_with_other_threads_running(ow
     finally:
         stop.set()
     assert reached == ["held back"]
+
+
+def test_sigterm_swallowed_by_ipopt_stops_rig_with_143(tmp_path, capsys, monkeypatch, own_handlers):
+    """`facebasis rig` with a SIGTERM that IPOPT swallows (as CasADi does with any exception raised
+    in a callback): exit 143, one line, no output folder, no staging folder."""
+    from conftest import write_rig_inputs
+
+    from facebasis.cli import main
+    from facebasis.rigging import weights
+    from facebasis.rigging.synthetic import default_face_problem
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # what a fresh process has; main() installs its handler
+    root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=6))
+    real_init = weights.WeightSolver.__init__
+
+    def init(self, *a, **k):
+        real_init(self, *a, **k)
+        solver = self._solver
+
+        def swallowing(**args):
+            try:
+                signal.raise_signal(signal.SIGTERM)
+            except KeyboardInterrupt:
+                pass
+            return solver(**args)
+
+        self._solver = swallowing
+
+    monkeypatch.setattr(weights.WeightSolver, "__init__", init)
+    code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
+                 "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
+                 "--out", str(root / "out"), "--iterations", "2"])
+    err = capsys.readouterr().err
+    assert code == 143 and one_line(err) and err.startswith("interrupted: facebasis rig stopped by SIGTERM"), err
+    assert not (root / "out").exists() and not list(root.glob(".out*"))
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # main() put the caller's handler back
 
 
 def test_an_ignored_signal_stays_ignored(own_handlers):

@@ -100,8 +100,10 @@ def tree(folder: Path) -> dict:
 
 
 def leftovers(parent: Path, name: str) -> list:
-    """Staging or swapped-out siblings of ``parent/name`` (``.name.*``)."""
-    return sorted(p.name for p in parent.iterdir() if p.name.startswith(f".{name}."))
+    """What lies beside the output ``parent/name`` besides it and the test's own files: staging or
+    swapped-out folders, temporary files (whatever their names)."""
+    return sorted(p.name for p in parent.iterdir() if p.name not in (name, "driver.py", "template", "target.obj",
+                                                                      "workers.txt"))
 
 
 def one_line(err: str) -> bool:

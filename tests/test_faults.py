@@ -527,6 +527,48 @@ def test_sigterm_swallowed_by_ipopt_stops_rig_with_143(tmp_path, capsys, monkeyp
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # main() put the caller's handler back
 
 
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGHUP"])
+def test_replacing_a_folder_stopped_by_sigterm_at_every_step_leaves_old_or_new(tmp_path, sig, own_handlers):
+    """As test_interrupts' every-line test for Ctrl-C: SIGTERM / SIGHUP raised at the n-th line run in
+    facebasis.atomic (n = 1, 2, ... until a run ends undisturbed) leave the old folder or the new one,
+    and nothing beside it."""
+    from test_interrupts import _interrupt_everywhere, _replace, _tree
+
+    import facebasis.atomic as atomic
+    from facebasis.interrupt import install_stop_handlers
+
+    signum = getattr(signal, sig)
+    signal.signal(signum, signal.SIG_DFL)
+    install_stop_handlers()
+    marker = {atomic.OUTPUT_MARKER: (atomic.OUTPUT_MARKER, None)}  # compared by name only: its text may change
+    old_files = {f"old{i}.txt": b"old" for i in range(6)}
+    new_files = {"new0.txt": b"new", "new1.txt": b"new", "new2.txt": b"new", "sub/x.txt": b"new"}
+
+    def make(n):
+        out = tmp_path / f"run{n}" / "out"
+        out.mkdir(parents=True)
+        for name, data in old_files.items():
+            (out / name).write_bytes(data)
+        (out / atomic.OUTPUT_MARKER).write_text("written by facebasis\n")
+        return out.parent, out
+
+    def check(root, out, interrupted):
+        assert sorted(p.name for p in root.iterdir()) == ["out"]
+        tree = {k: v for k, v in _tree(out).items() if k not in marker}
+        assert tree in (old_files, new_files)
+        return "old" if tree == old_files else "new", interrupted
+
+    import test_interrupts
+
+    real_raise = signal.raise_signal
+    try:  # the helper raises SIGINT at each line: raise this signal instead
+        test_interrupts.signal.raise_signal = lambda s: real_raise(signum)
+        outcomes, n = _interrupt_everywhere(make, _replace, check)
+    finally:
+        test_interrupts.signal.raise_signal = real_raise
+    assert ("old", True) in outcomes and ("new", False) in outcomes and n > 10
+
+
 def test_an_ignored_signal_stays_ignored(own_handlers):
     """`nohup` ignores SIGHUP: the command keeps it ignored (and interruptible() leaves it alone)."""
     from facebasis.interrupt import install_stop_handlers, interruptible

@@ -72,7 +72,7 @@ _OS_ADVICE = {
 def os_error_line(exc: OSError, command: str, out=None) -> str:
     """One line for an operating-system error: the path (the output it was being written for, when
     it lies in that output's staging area), what failed and the errno name, e.g.
-    ``facebasis rig: writing output run/ (staging file .run.partial-12-ab/jawOpen.obj): No space left on
+    ``facebasis rig: writing output run (staging .run.partial-12-ab/jawOpen.obj): No space left on
     device [ENOSPC]; the disk is full: free space or write elsewhere``."""
     name = errno.errorcode.get(exc.errno or 0, "")
     what = exc.strerror or str(exc) or type(exc).__name__

@@ -1,9 +1,11 @@
 """The ``facebasis`` command line: a thin layer over the library.
 
 Every user error is a :class:`~facebasis.errors.FacebasisError`: it is printed as ``error: ...``
-on stderr and the command exits with status 2. Outputs are written atomically. Ctrl-C stops any
-command at once, even inside IPOPT, prints one line and exits with status 130, leaving either the
-old output or none.
+on stderr and the command exits with status 2. An operating-system error (disk full, read-only
+location, no permission, a symbolic-link loop) is one such line too, naming the path, the errno and
+what to do. Outputs are written atomically. Ctrl-C, SIGTERM and SIGHUP stop any command at once,
+even inside IPOPT, print one line and exit with 128 + the signal's number (130, 143, 129), leaving
+either the old output or none (:mod:`facebasis.interrupt`).
 
 One module per group of commands; each only parses, calls the library and prints:
 :mod:`.demo`, :mod:`.rigging` (transfer, rig, export, verify), :mod:`.contact` (virtual-edges,

@@ -65,6 +65,19 @@ def check_json_text(text: str, label: str, expected: str) -> None:
                              f"(at most {MAX_DEPTH} are read)")
 
 
+def _first_hole(path: Path) -> int | None:
+    """Offset of the first hole of a sparse file (``SEEK_HOLE``; no data read), or None."""
+    if not hasattr(os, "SEEK_HOLE"):
+        return None
+    with open(path, "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        try:
+            hole = os.lseek(fh.fileno(), 0, os.SEEK_HOLE)
+        except OSError:
+            return None
+    return hole if hole < size else None
+
+
 def read_json(path: str | os.PathLike, expected: str, what: str | None = None):
     """Parse the JSON file ``path``.
 
@@ -93,6 +106,10 @@ def read_json(path: str | os.PathLike, expected: str, what: str | None = None):
     if not path.is_file():
         raise InputError(f"{label}: expected {expected}, found no such file")
     try:
+        hole = _first_hole(path)
+        if hole is not None:  # a sparse file: its unwritten bytes read as zeros, never JSON; refused unread
+            raise InputError(f"{label}: expected {expected}, found a sparse file of {path.stat().st_size:,} bytes "
+                             f"with a hole (bytes never written) from byte {hole:,}")
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{label}: expected {expected}, found unreadable bytes ({exc})") from None

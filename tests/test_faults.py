@@ -637,6 +637,12 @@ def test_hostile_json_is_refused_before_parsing(tmp_path):
         read_json(tmp_path / "over.json", "x")
     assert read_json(tmp_path / "ok.json", "x")["b"] == [[["x"]]]  # brackets and digits in strings do not count
     assert isinstance(read_json(tmp_path / "edge.json", "x"), list)  # the limit itself is read
+    with open(tmp_path / "sparse.json", "wb") as fh:  # 1 GB never written: refused unread
+        fh.write(b'{"a": 1}')
+        fh.truncate(1 << 30)
+    with pytest.raises(InputError, match=r"sparse.json: expected x, found (a sparse file of 1,073,741,824 bytes with a "
+                                         r"hole|invalid JSON)"):
+        read_json(tmp_path / "sparse.json", "x")
 
 
 def test_hostile_weights_through_the_cli_are_one_line(tmp_path, capsys, own_handlers):

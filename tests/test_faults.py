@@ -772,3 +772,21 @@ def test_animate2d_on_an_undecodable_video_is_one_line(tmp_path, capsys, own_han
     assert one_line(err) and err.startswith(f"error: capture {tmp_path / 'cap'}: its video {tmp_path / 'video.mp4'}: "
                                             "expected a decodable video, found InvalidDataError"), err
     assert not (tmp_path / "out").exists()
+
+
+def test_progress_bars_appear_only_for_long_loops_and_write_no_newline(capsys, monkeypatch):
+    import facebasis.progress as progress
+
+    monkeypatch.setenv("FACEBASIS_PROGRESS", "1")
+    assert list(progress.progress(range(50), desc="reading")) == list(range(50))  # fast: nothing shown
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(progress, "DELAY", 0.0)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    with progress.progress(total=4, desc="writing shapes") as bar:
+        for _ in range(4):
+            bar.update(1)
+    err = capsys.readouterr().err
+    assert "writing shapes" in err and "\n" not in err  # a bar, erased at the end: the one-line rule holds
+    monkeypatch.setenv("FACEBASIS_PROGRESS", "0")
+    list(progress.progress(range(3), desc="off"))
+    assert capsys.readouterr().err == ""

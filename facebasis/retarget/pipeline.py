@@ -89,7 +89,10 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
                  rest=anim.rest, fps=np.float64(cap.fps))
         import cv2
 
-        cv2.imwrite(str(stage / "cartoon_rest.png"), np.ascontiguousarray(img[..., ::-1]))
+        ok, png = cv2.imencode(".png", np.ascontiguousarray(img[..., ::-1]))  # imwrite fails silently (full disk)
+        if not ok:  # pragma: no cover - OpenCV cannot encode an (H, W, 3) uint8 image
+            raise InputError(f"cartoon image: OpenCV could not encode it as PNG ({img.shape}, {img.dtype})")
+        atomic_write_bytes(stage / "cartoon_rest.png", png.tobytes())
         summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c,
                    "video_beside": str(video) if video is not None else None,
                    "warp_ms_per_frame": 1e3 * warp_seconds / max(n, 1), "seconds": time.perf_counter() - t0}

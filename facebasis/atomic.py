@@ -172,8 +172,9 @@ def check_output(out, inputs: Iterable = (), *, kind: str = "folder", what: str 
                            f"link (to {target}); name the real path instead")
     blocker = next((p for p in given.parents if os.path.lexists(p) and not p.is_dir()), None)
     if blocker is not None:
-        raise _input_error(f"{what} {out}: expected a folder path, found "
-                           f"{'the file' if blocker.exists() else 'a broken link or unreadable entry'} {blocker} in it")
+        found = (f"the symbolic link {blocker} (to {os.readlink(blocker)}), which leads to no folder (it is broken or "
+                 "loops)," if os.path.islink(blocker) else f"the file {blocker}")
+        raise _input_error(f"{what} {out}: expected a folder path, found {found} in it")
     resolved = given.resolve()
     cwd = Path.cwd().resolve()
     if resolved == cwd or resolved in cwd.parents:

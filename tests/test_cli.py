@@ -47,7 +47,7 @@ def test_transfer_cli_bad_target_leaves_nothing(template_dir, capsys):
     assert not list(template_dir.glob(".out*"))  # no staging folder left behind
 
 
-def test_atomic_output_keeps_previous_result_on_failure(template_dir, monkeypatch):
+def test_atomic_output_keeps_previous_result_on_failure(template_dir, monkeypatch, capsys):
     out = template_dir / "out"
     args = ["transfer", "--template", str(template_dir / "template"), "--target",
             str(template_dir / "person.obj"), "--out", str(out)]
@@ -61,12 +61,15 @@ def test_atomic_output_keeps_previous_result_on_failure(template_dir, monkeypatc
     def failing(path, V, F):
         calls["n"] += 1
         if calls["n"] == 3:
-            raise OSError("disk full")
+            raise OSError(28, "No space left on device", str(path))
         return real(path, V, F)
 
     monkeypatch.setattr(rigmod, "write_mesh", failing)
-    with pytest.raises(OSError, match="disk full"):
-        main(args)
+    capsys.readouterr()
+    assert main(args) == 2  # an OS error is one line naming the output, exit 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: facebasis transfer: writing output {out} (staging .out.")
+    assert "No space left on device [ENOSPC]; the disk is full" in err
     assert sorted(p.name for p in out.iterdir()) == before
     assert not list(template_dir.glob(".out*"))
 

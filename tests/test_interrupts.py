@@ -13,6 +13,17 @@ from facebasis.atomic import atomic_directory, atomic_write_bytes
 from facebasis.interrupt import interruptible
 
 
+@pytest.fixture(autouse=True)
+def sigint_raises():
+    """These tests send SIGINT to this process: make it raise KeyboardInterrupt even where the suite
+    was started with SIGINT ignored (under ``nohup``, as a background job of a script)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def test_an_interrupt_swallowed_inside_the_block_is_raised_when_it_ends():
     reached = []
     with pytest.raises(KeyboardInterrupt):

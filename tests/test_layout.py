@@ -12,7 +12,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "facebasis"
 
-BASE = {"base"}                      # facebasis.errors, facebasis.atomic, facebasis.interrupt, facebasis.jsonio
+BASE = {"base"}  # facebasis.errors, .atomic, .interrupt, .jsonio, .workers (worker processes), .progress (bars)
 ALLOWED = {
     "base": BASE,
     "geometry": BASE | {"geometry"},
@@ -29,11 +29,12 @@ TOP = {"cli", "__init__", "defaults.demo"}   # the command line, the package's p
 
 
 def unit_of(module: str) -> str:
-    """``facebasis.geometry.rig`` -> ``geometry``; errors/atomic/interrupt/jsonio -> base; entry points -> top."""
+    """``facebasis.geometry.rig`` -> ``geometry``; errors/atomic/interrupt/jsonio/workers/progress -> base;
+    entry points -> top."""
     parts = module.split(".")[1:]
     if not parts:
         return "top"
-    if parts[0] in ("errors", "atomic", "interrupt", "jsonio"):
+    if parts[0] in ("errors", "atomic", "interrupt", "jsonio", "workers", "progress"):
         return "base"
     if parts[0] == "cli" or ".".join(parts[:2]) in TOP:
         return "top"

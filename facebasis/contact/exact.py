@@ -149,6 +149,8 @@ def _correct_all(solver: "ContactSolver", jobs: list, workers: int | None) -> li
     (largest plain motion first, so that the slow shapes start early)."""
     import multiprocessing as mp
 
+    from ..workers import fork_pool
+
     workers = _available_cores() if workers is None else int(workers)
     workers = max(1, min(workers, len(jobs)))
     if workers == 1 or "fork" not in mp.get_all_start_methods():
@@ -157,7 +159,7 @@ def _correct_all(solver: "ContactSolver", jobs: list, workers: int | None) -> li
     order = sorted(range(len(jobs)), key=lambda k: -float(np.abs(jobs[k][1]).sum()))
     _SOLVER = solver
     try:
-        pool = mp.get_context("fork").Pool(workers)
+        pool = fork_pool(workers)  # workers ignore Ctrl-C, die with this process, print nothing
         try:
             done = pool.map(_correct_job, [jobs[k] for k in order], chunksize=1)
             pool.close()

@@ -149,6 +149,8 @@ def _parallel_groups(V, G, P, jobs, limit):
     import multiprocessing as mp
     import os
 
+    from ..workers import worker_init
+
     try:
         cores = len(os.sched_getaffinity(0))
         ctx = mp.get_context("fork")
@@ -159,7 +161,7 @@ def _parallel_groups(V, G, P, jobs, limit):
     _SHARED.update(V=V, G=G, P=P, jobs=jobs)
     try:
         bounds = np.linspace(0, len(jobs), cores + 1).astype(int)
-        with ctx.Pool(cores) as pool:
+        with ctx.Pool(cores, initializer=worker_init, initargs=(os.getpid(),)) as pool:  # see facebasis.workers
             parts = pool.map(_worker, [((bounds[i], bounds[i + 1]), limit) for i in range(cores)])
     finally:
         _SHARED.clear()

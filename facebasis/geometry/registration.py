@@ -273,21 +273,36 @@ def register_scan(template_V, template_F, scan_V, scan_F, options: RegistrationO
         scan_V, scan_F, scan_landmarks, start)
 
 
+#: the run's own file in the output folder: a scan of this stem would have its report overwritten
+SUMMARY_STEM = "summary"
+
+
 def _scan_files(scan_or_dir: Path) -> list[Path]:
     from .meshio import MESH_SUFFIXES
 
     if scan_or_dir.is_dir():
-        files = sorted(p for p in scan_or_dir.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+        named = sorted(p for p in scan_or_dir.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+        broken = [p for p in named if p.is_symlink() and not p.exists()]
+        if broken:
+            raise InputError(f"scans {scan_or_dir}: expected readable scan files, found symbolic link(s) leading nowhere: "
+                             + ", ".join(f"{p.name} -> {os.readlink(p)}" for p in broken[:3]))
+        files = [p for p in named if p.is_file()]
         if not files:
             raise InputError(f"scans {scan_or_dir}: expected .obj or .ply files in the folder, found none")
         stems = [p.stem for p in files]
         dup = sorted({s for s in stems if stems.count(s) > 1})
         if dup:
             raise InputError(f"scans {scan_or_dir}: expected one file per name, found {dup[0]} twice (.obj and .ply)")
-        return files
-    if not scan_or_dir.exists():
+    elif not scan_or_dir.exists():
         raise InputError(f"scans {scan_or_dir}: expected a scan file or a folder of scans, found no such path")
-    return [scan_or_dir]
+    else:
+        files = [scan_or_dir]
+    clash = [p for p in files if p.stem.casefold() == SUMMARY_STEM]
+    if clash:
+        raise InputError(f"scans {scan_or_dir}: expected scan names other than '{SUMMARY_STEM}' (the run writes "
+                         f"{SUMMARY_STEM}.json, which would overwrite the report {clash[0].stem}.json of this scan), "
+                         f"found {clash[0].name}; rename the scan")
+    return files
 
 
 def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,

@@ -109,12 +109,22 @@ def _matches(p: Path, glob: str) -> bool:
     return fnmatch.fnmatch(p.name, glob) or fnmatch.fnmatch(p.stem, glob)
 
 
-def _mesh_files(folder: Path, exclude: Sequence[str]) -> list[Path]:
+def _mesh_files(folder: Path, exclude: Sequence[str], excluded_later: Sequence[str] = ()) -> list[Path]:
     """Mesh files of ``folder`` by name, without hidden ones (``.name``: editors' and macOS's
-    ``._name`` companions) and those matching an ``exclude`` glob."""
-    return [p for p in sorted(folder.iterdir())
-            if p.is_file() and p.suffix.lower() in MESH_SUFFIXES and not p.name.startswith(".")
-            and not any(_matches(p, g) for g in exclude)]
+    ``._name`` companions) and those matching an ``exclude`` glob. A mesh name that is a symbolic
+    link leading nowhere (or in a loop) is a :class:`RigError` naming it, not a shape dropped."""
+    named = [p for p in sorted(folder.iterdir())
+             if p.suffix.lower() in MESH_SUFFIXES and not p.name.startswith(".")
+             and not any(_matches(p, g) for g in exclude)]
+    broken = [p for p in named if p.is_symlink() and not p.exists()
+              and not any(_matches(p, g) for g in excluded_later)]
+    if broken:
+        shown = ", ".join(f"{p.name} -> {os.readlink(p)}" for p in broken[:3])
+        raise RigError(f"rig folder {folder}: expected every mesh file to be readable, found "
+                       f"{len(broken)} symbolic link{'s' if len(broken) > 1 else ''} leading nowhere ({shown}"
+                       f"{' and more' if len(broken) > 3 else ''}); restore the target or remove the link, or "
+                       "leave it out with --exclude")
+    return [p for p in named if p.is_file()]
 
 
 def load_rig_folder(
@@ -138,19 +148,24 @@ def load_rig_folder(
     if not folder.is_dir():
         raise RigError(f"rig folder {folder}: expected a folder of meshes, found no such folder")
     neutral_path = folder / neutral
-    every = _mesh_files(folder, ())  # the folder listed once
+    every = _mesh_files(folder, (), exclude)  # the folder listed once
     if not neutral_path.is_file():
         raise RigError(
             f"rig folder {folder}: expected the neutral '{neutral}', found no such file "
             f"(mesh files there: {[p.name for p in every][:10]}); name it with --neutral"
         )
     unmatched = [g for g in exclude if not any(_matches(p, g) for p in every)]
+    if unmatched:  # a pattern may match a broken link left out on purpose
+        links = [p for p in folder.iterdir() if p.is_symlink() and not p.exists()]
+        unmatched = [g for g in unmatched if not any(_matches(p, g) for p in links)]
     if unmatched:  # a typo would otherwise keep the meshes the user meant to leave out
         raise RigError(f"rig folder {folder}: expected every --exclude pattern to match a mesh file, found none for "
                        f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})")
     V0, F0 = read_mesh(neutral_path, check_degenerate=True)
     names, deltas = [], []
-    for p in every:
+    from ..progress import progress
+
+    for p in progress(every, desc=f"reading {folder}"):
         if any(_matches(p, g) for g in exclude) or p.resolve() == neutral_path.resolve():
             continue
         V = read_mesh_like(p, len(V0), F0, str(neutral_path))
@@ -181,6 +196,7 @@ def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj"
     the plain ``v``/``f`` OBJ of :func:`~facebasis.geometry.obj.obj_bytes`. Returns the MTL files
     and textures the template names but lacks (nothing to copy)."""
     from ..atomic import atomic_write_bytes
+    from ..progress import progress
     from .objlayout import copy_side_files
 
     layout = layout if layout is not None else rig.layout
@@ -189,14 +205,14 @@ def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj"
     if layout is None:
         if neutral_name:
             write_mesh(stage / neutral_name, rig.neutral, rig.faces)
-        for name, d in zip(rig.names, rig.deltas):
+        for name, d in progress(zip(rig.names, rig.deltas), total=rig.n_shapes, desc="writing shapes"):
             write_mesh(stage / f"{name}.obj", rig.neutral + d, rig.faces)
         return []
     if neutral_name and not neutral_name.lower().endswith(".obj"):
         write_mesh(stage / neutral_name, rig.neutral, rig.faces)
     elif neutral_name:
         atomic_write_bytes(stage / neutral_name, layout.obj_bytes(rig.neutral))
-    for name, d in zip(rig.names, rig.deltas):
+    for name, d in progress(zip(rig.names, rig.deltas), total=rig.n_shapes, desc="writing shapes"):
         atomic_write_bytes(stage / f"{name}.obj", layout.obj_bytes(rig.neutral + d))
     return copy_side_files(layout, stage)
 

@@ -183,12 +183,16 @@ class DeformationTransfer:
                              "solve_frame_deltas(..., extra_targets=...)")
         out = np.empty((len(idx),) + self.template.neutral.shape)
         step = len(idx) if self.virtual_edges is not None else SHAPES_PER_SOLVE
-        for s in range(0, len(idx), max(step, 1)):  # groups of shapes: memory reused, not re-faulted
-            D = self.template.deltas[idx[s:s + step]]
-            dA = frames_cm(self.template.neutral + D, self.template.faces)  # A_i^S - A_0^S, once for both uses
-            dA -= self.template_frames
-            out[s:s + step] = self.solve_frame_deltas(self.transferred_frame_deltas(D, frame_deltas=dA),
-                                                      self.anchor_values(D), self.virtual_edge_cols(D, frame_deltas=dA))
+        from ..progress import progress
+
+        with progress(total=len(idx), desc="transferring") as bar:
+            for s in range(0, len(idx), max(step, 1)):  # groups of shapes: memory reused, not re-faulted
+                D = self.template.deltas[idx[s:s + step]]
+                dA = frames_cm(self.template.neutral + D, self.template.faces)  # A_i^S - A_0^S, once for both uses
+                dA -= self.template_frames
+                out[s:s + step] = self.solve_frame_deltas(self.transferred_frame_deltas(D, frame_deltas=dA),
+                                                          self.anchor_values(D), self.virtual_edge_cols(D, frame_deltas=dA))
+                bar.update(len(D))
         return Rig(self.target_neutral, self.template.faces,
                    tuple(self.template.names[i] for i in idx), out, source="deformation transfer",
                    layout=self.template.layout)

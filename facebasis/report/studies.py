@@ -175,6 +175,44 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+def _quiet_local_cluster(LocalCluster, n_workers: int):
+    """A local Dask cluster whose worker processes stop with this one and print nothing.
+
+    The workers are started with SIGINT blocked (the mask is inherited by the cluster's thread and by
+    every process it starts), so Ctrl-C to the process group stops this process alone, which then
+    closes the cluster: no worker prints a ``KeyboardInterrupt`` traceback. Dask's own warnings
+    about tasks cancelled by that close are not shown (``silence_logs``: errors only), and
+    multiprocessing's resource tracker is started with its stderr on ``/dev/null`` so that a SIGKILL
+    of this process does not make it print a leaked-semaphore warning. Dask workers already die with
+    their parent (its nanny watches a pipe to the parent)."""
+    import logging
+    import signal
+
+    _start_resource_tracker_quietly()
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                            silence_logs=logging.ERROR)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a Ctrl-C held back meanwhile arrives now
+
+
+def _start_resource_tracker_quietly() -> None:
+    try:
+        from multiprocessing import resource_tracker
+
+        saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    except (ImportError, OSError):  # pragma: no cover
+        return
+    try:
+        os.dup2(devnull, 2)
+        resource_tracker.ensure_running()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def run_tasks(tasks, scheduler: str | None = None, workers: int | None = None, progress: bool = True) -> list[dict]:
     """Run tasks on Dask: a local cluster of ``workers`` processes (default: one per core), or the
     scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``) for a real cluster. Returns the rows
@@ -188,8 +226,7 @@ def run_tasks(tasks, scheduler: str | None = None, workers: int | None = None, p
         client = Client(scheduler)
         cluster = None
     else:
-        cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1, processes=True,
-                               dashboard_address=":0")
+        cluster = _quiet_local_cluster(LocalCluster, workers or _cores())
         client = Client(cluster)
     try:
         futures = client.map(run_task, tasks, pure=False)

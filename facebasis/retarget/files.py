@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..jsonio import read_json
+from ..jsonio import check_json_text, read_json
 
 
 def read_indices(path) -> np.ndarray:
@@ -24,7 +24,29 @@ def read_indices(path) -> np.ndarray:
     if not isinstance(data, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in data):
         raise InputError(f"landmark index file {path}: expected a JSON list of integers (or {{\"indices\": [...]}}), "
                          f"found {type(data).__name__}")
-    return np.asarray(data, np.int64)
+    idx = np.asarray(data, np.int64)
+    dup = repeated_indices(idx)
+    if dup:
+        raise InputError(f"landmark index file {path}: expected distinct vertex indices (one vertex per landmark), "
+                         f"found {dup}")
+    return idx
+
+
+def repeated_indices(idx) -> str:
+    """'' if the integers ``idx`` (L,) are distinct, else a description of the repeats for an error
+    message: ``"vertex 12 at positions 0, 5 and 7; vertex 40 at positions 2, 3"`` (first 3 shown)."""
+    idx = np.asarray(idx).ravel()
+    values, inverse, counts = np.unique(idx, return_inverse=True, return_counts=True)
+    rep = np.flatnonzero(counts > 1)
+    if not len(rep):
+        return ""
+    parts = []
+    for r in rep[:3]:
+        pos = np.flatnonzero(inverse == r)
+        shown = ", ".join(str(p) for p in pos[:5]) + (f" and {len(pos) - 5} more" if len(pos) > 5 else "")
+        parts.append(f"vertex {int(values[r])} {len(pos)} times (positions {shown})")
+    more = f"; and {len(rep) - 3} more repeated" if len(rep) > 3 else ""
+    return "; ".join(parts) + more
 
 
 def read_points2d(path) -> np.ndarray:
@@ -47,9 +69,10 @@ def read_points2d(path) -> np.ndarray:
         except ValueError as exc:
             raise InputError(f"cartoon landmark file {path}: expected two numbers per line ({exc})") from exc
     elif suffix == ".json":
+        check_json_text(text, f"cartoon landmark file {path}", "a list of [x, y] pairs")
         try:
             data = json.loads(text)
-        except ValueError as exc:
+        except (ValueError, RecursionError) as exc:
             raise InputError(f"cartoon landmark file {path}: expected JSON ({exc})") from exc
         if isinstance(data, dict):
             data = data.get("landmarks", data.get("points"))
@@ -63,7 +86,25 @@ def read_points2d(path) -> np.ndarray:
         raise InputError(f"cartoon landmark file {path}: expected (L, 2) points, found shape {pts.shape}")
     if not np.isfinite(pts).all():
         raise InputError(f"cartoon landmark file {path}: expected finite coordinates, found NaN/inf")
+    flat = flat_spread(pts)
+    if flat:
+        raise InputError(f"cartoon landmark file {path}: expected points spread over the face, found {flat} "
+                         "(no face can be placed on them)")
     return pts
+
+
+def flat_spread(points, rtol: float = 1e-6) -> str:
+    """'' if the points (L, 2) span an area, else ``"all points equal at (x, y)"`` or ``"all points
+    on one line"``: the singular values of the centred points (a rank test, scale-free)."""
+    P = np.asarray(points, np.float64)
+    C = P - P.mean(0)
+    s = np.linalg.svd(C, compute_uv=False) if len(P) > 1 else np.zeros(2)
+    if len(P) < 3 or s[0] <= rtol * max(1.0, float(np.abs(P).max())):
+        return f"all points equal at ({P[0, 0]:g}, {P[0, 1]:g})" if len(P) and s[0] == 0 else \
+            f"{len(P)} points that span no area"
+    if s[1] <= rtol * s[0]:
+        return "all points on one line"
+    return ""
 
 
 def write_pts(path, points) -> None:
@@ -88,4 +129,4 @@ def read_image(path) -> np.ndarray:
     return np.ascontiguousarray(img[..., ::-1])
 
 
-__all__ = ["read_indices", "read_points2d", "write_pts", "read_image"]
+__all__ = ["read_indices", "repeated_indices", "flat_spread", "read_points2d", "write_pts", "read_image"]

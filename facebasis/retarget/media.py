@@ -54,15 +54,33 @@ def write_mp4(path, frames: Iterable[np.ndarray], fps: float) -> int:
     return n
 
 
-def read_video_frames(path, limit: int | None = None):
-    """Yield RGB frames (H, W, 3) uint8 of a video file (PyAV)."""
+def read_video_frames(path, limit: int | None = None, what: str = "video"):
+    """Yield RGB frames (H, W, 3) uint8 of a video file (PyAV).
+
+    Raises
+    ------
+    InputError
+        The file is missing or cannot be decoded (PyAV's error, named with the file), when opened
+        or at any frame.
+    """
     import av
 
-    with av.open(str(path)) as container:
-        for i, frame in enumerate(container.decode(video=0)):
-            if limit is not None and i >= limit:
-                break
-            yield frame.to_ndarray(format="rgb24")
+    try:
+        with av.open(str(path)) as container:
+            for i, frame in enumerate(container.decode(video=0)):
+                if limit is not None and i >= limit:
+                    break
+                yield frame.to_ndarray(format="rgb24")
+    except (av.error.FFmpegError, OSError) as exc:
+        raise InputError(f"{what} {path}: expected a decodable video, found {type(exc).__name__}: "
+                         f"{getattr(exc, 'strerror', None) or exc}") from None
+
+
+def check_video(path, what: str = "video") -> None:
+    """Decode the first frame of ``path`` (an :class:`InputError` naming it if that fails): a
+    video found undecodable only after the work would cost the whole run."""
+    for _ in read_video_frames(path, limit=1, what=what):
+        break
 
 
 def side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -93,4 +111,4 @@ def write_gif(path, frames, fps: float, max_seconds: float = 4.0, width: int = 2
     return len(imgs)
 
 
-__all__ = ["pick_codec", "write_mp4", "read_video_frames", "side_by_side", "write_gif"]
+__all__ = ["pick_codec", "write_mp4", "read_video_frames", "check_video", "side_by_side", "write_gif"]

@@ -35,7 +35,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     faces), ``cartoon_rest.png`` and ``summary.json``.
     """
     from .files import read_image, read_points2d
-    from .media import read_video_frames, side_by_side, write_gif, write_mp4
+    from .media import check_video, read_video_frames, side_by_side, write_gif, write_mp4
     from .warp2d import CartoonAnimator
 
     cap = read_capture(capture_dir)
@@ -63,11 +63,13 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
               f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}")
     overlay = Path(capture_dir) / OVERLAY_FILE  # the source video, or else the capture's overlay of it
     video = cap.video if cap.video is not None else (overlay if overlay.is_file() else None)
+    if video is not None:
+        check_video(video, f"capture {capture_dir}: its video")
     gif_frames, warp_seconds = [], 0.0
 
     def frames():
         nonlocal warp_seconds
-        src = read_video_frames(video) if video is not None else None
+        src = read_video_frames(video, what=f"capture {capture_dir}: its video") if video is not None else None
         for f in range(cap.n_frames):
             t1 = time.perf_counter()
             out = anim.warp(meshes[f])
@@ -87,7 +89,10 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
                  rest=anim.rest, fps=np.float64(cap.fps))
         import cv2
 
-        cv2.imwrite(str(stage / "cartoon_rest.png"), np.ascontiguousarray(img[..., ::-1]))
+        ok, png = cv2.imencode(".png", np.ascontiguousarray(img[..., ::-1]))  # imwrite fails silently (full disk)
+        if not ok:  # pragma: no cover - OpenCV cannot encode an (H, W, 3) uint8 image
+            raise InputError(f"cartoon image: OpenCV could not encode it as PNG ({img.shape}, {img.dtype})")
+        atomic_write_bytes(stage / "cartoon_rest.png", png.tobytes())
         summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c,
                    "video_beside": str(video) if video is not None else None,
                    "warp_ms_per_frame": 1e3 * warp_seconds / max(n, 1), "seconds": time.perf_counter() - t0}

@@ -159,8 +159,8 @@ class RetargetResult:
 
 
 def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
-    """(L,) int64 vertex indices; :class:`InputError` if the count is not the capture's L or an index
-    is out of range."""
+    """(L,) int64 vertex indices; :class:`InputError` if the count is not the capture's L, an index
+    is out of range or one vertex is given twice (two landmarks pinned to one vertex)."""
     idx = np.asarray(indices)
     if idx.ndim != 1 or not (np.issubdtype(idx.dtype, np.integer) or (idx.size == 0)):
         if idx.ndim == 1 and np.issubdtype(idx.dtype, np.floating) and np.all(idx == np.round(idx)):
@@ -174,6 +174,11 @@ def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str
     bad = idx[(idx < 0) | (idx >= n_vertices)]
     if len(bad):
         raise InputError(f"{name}: expected vertex indices in [0, {n_vertices}), found {bad[:10].tolist()}")
+    from .files import repeated_indices
+
+    dup = repeated_indices(idx)
+    if dup:
+        raise InputError(f"{name}: expected distinct vertex indices (one vertex per landmark), found {dup}")
     return idx
 
 

@@ -402,7 +402,7 @@ def test_landmarks_command_round_trip_into_capture(tmp_path, capsys):
     single = tmp_path / "one.png"
     cv2.imwrite(str(single), cv2.imread(str(d / "f0.png")))
     assert _run(["landmarks", str(single), "--out", str(tmp_path / "one.pts")]) == 0
-    assert np.abs(read_landmarks(tmp_path / "one.pts") - pts).max() < 1e-6 or _installed_detector() == "mediapipe"
+    assert np.abs(read_landmarks(tmp_path / "one.pts") - pts).max() < 0.5   # the same picture as one image
     res = capture(d, landmarks=out, out=tmp_path / "cap", overlay=False, max_frames=2)
     assert np.allclose(res.landmarks[0], pts, atol=1e-3)        # the .pts read back as the first frame
 

@@ -309,6 +309,24 @@ def test_detection_noise_measures_jitter_not_motion():
         DetectionNoise(3, prior=0.0, floor=1.0)
 
 
+def test_detection_noise_counts_a_slow_error_of_the_calm_stretch():
+    """A detector smooth from frame to frame (0.1 px jitter) but off by a slow 1.5 px wander: the
+    frame-to-frame change misses the wander, the calm-stretch residual against the track sees it."""
+    rng = np.random.default_rng(0)
+    L, T = 4, 120
+    true = np.cumsum(rng.normal(0, 1.0, (T, L, 2)), axis=0)
+    t = np.arange(T)[:, None, None]
+    err = 1.5 * np.sin(2 * np.pi * t / 40 + rng.random((1, L, 2)) * 6) + 0.1 * rng.standard_normal((T, L, 2))
+    err -= err[0]                                        # frame 0: track and detection coincide
+    fast, both = DetectionNoise(L, 3.0, 0.05), DetectionNoise(L, 3.0, 0.05)
+    for k in range(T):
+        motion = true[k] - true[k - 1] if k else np.zeros((L, 2))
+        fast.update(true[k] + err[k], motion)
+        both.update(true[k] + err[k], motion, true[k])
+    assert np.all(fast.sigma < 0.6)                      # the jitter (plus a little of the wander)
+    assert np.all(both.sigma > 0.8) and np.all(both.sigma < 2.5)
+
+
 # -------------------------------------------------------------------------------------------- mediapipe
 
 def test_mapping_table_is_68_distinct_face_mesh_points():

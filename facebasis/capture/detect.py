@@ -251,6 +251,13 @@ class DetectionNoise:
     inflate it. Using LK's motion rather than the filter's estimate keeps the estimate free of the
     detections' own pull on the track (which would shrink it and trust the detector more and more).
 
+    The frame-to-frame change sees only the detector's fast jitter. Its slow error (MediaPipe in
+    video mode is smooth from frame to frame but off by an amount that drifts with pose and
+    expression) is measured over the calm first stretch of the take, where the track has not had
+    time to drift: the RMS per axis of ``d_t - x_t`` (detection minus tracked point, zero on frame 0
+    where both are the same detection) over the first ``warmup`` detections. The standard deviation
+    used is the larger of the two estimates (and of ``floor``).
+
     The estimate ``s`` (pixels, shape ``(L,)``) is the detection likelihood's standard deviation in
     the particle filter, so a detector as noisy as MediaPipe (2-3 px) nudges the track by a small
     fraction of its residual per frame and corrects drift over tens of frames without bringing its
@@ -277,21 +284,34 @@ class DetectionNoise:
         self._prev = None                       # last detection (L, 2)
         self._seen: list[np.ndarray] = []       # squared changes during the warm-up, (L,) each
         self._var = None                        # per-axis variance s^2, (L,)
+        self._calm: list[np.ndarray] = []       # squared residuals d_t - x_t of the calm stretch, (L,) each
+        self._calm_var = None                   # their mean per axis, (L,)
 
     @property
     def sigma(self) -> np.ndarray:
         """Current standard deviation per landmark (pixels), shape ``(L,)``."""
         if self._var is None:
             return np.full(self.L, self.prior)
-        return np.maximum(np.sqrt(self._var), self.floor)
+        var = self._var if self._calm_var is None else np.maximum(self._var, self._calm_var)
+        return np.maximum(np.sqrt(var), self.floor)
 
-    def update(self, detections: np.ndarray | None, motion: np.ndarray) -> np.ndarray:
-        """Take one frame's detection ``(L, 2)`` (or None) and LK's motion of the landmarks from the
-        previous frame ``(L, 2)``; returns :attr:`sigma`."""
+    def update(self, detections: np.ndarray | None, motion: np.ndarray,
+               tracked: np.ndarray | None = None) -> np.ndarray:
+        """Take one frame's detection ``(L, 2)`` (or None), LK's motion of the landmarks from the
+        previous frame ``(L, 2)`` and, optionally, the tracked points ``(L, 2)`` of the frame (for the
+        calm-stretch estimate); returns :attr:`sigma`."""
         if detections is None:
             self._prev = None
             return self.sigma
         det = np.asarray(detections, float)
+        if tracked is not None and self._calm_var is None:
+            r2 = ((det - np.asarray(tracked, float)) ** 2).sum(1)
+            self._calm.append(np.where(np.isfinite(r2), r2, np.nan))
+            if len(self._calm) >= self.warmup:
+                with np.errstate(all="ignore"):
+                    v = np.nanmean(np.stack(self._calm), axis=0) / 2
+                self._calm_var = np.where(np.isfinite(v), v, self.prior ** 2)
+                self._calm = []
         if self._prev is not None:
             d2 = (((det - self._prev) - np.asarray(motion, float)) ** 2).sum(1)
             ok = np.isfinite(d2)

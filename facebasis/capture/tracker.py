@@ -376,7 +376,7 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
                     dets = d if d is not None and len(d) == tracker.L else None
                 res = tracker.track(frame, dets, None if noise is None else noise.sigma)
                 if noise is not None:
-                    noise.update(dets, tracker.lk_motion)
+                    noise.update(dets, tracker.lk_motion, res.landmarks)
                 lms.append(res.landmarks)
                 Vs.append(res.vertices)
                 losts.append(res.lost)

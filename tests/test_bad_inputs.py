@@ -96,6 +96,11 @@ CASES = [
     ("capture {d}/frames --landmarks {d}/first.pts --out {d}/afile", "afile"),
     ("capture {d}/notvideo.mp4 --landmarks {d}/first.pts --out {o}", "notvideo.mp4"),
     ("capture {d}/frames --landmarks {d}/first.pts --inner-lips open --out {o}", "--inner-lips"),
+    ("capture {d}/frames --detector opencv --out {o}", "--detector: expected one of dlib, mediapipe, found 'opencv'"),
+    ("landmarks {d}/nope.mp4 --out {o}.pts", "nope.mp4: expected a video file, an image or an image folder"),
+    ("landmarks {d}/frames --out {o}.txt", "--out: expected a file name ending in .pts"),
+    ("landmarks {d}/frames --frame -2 --out {o}.pts", "--frame: expected a frame number >= 0, found -2"),
+    ("landmarks {d}/frames --detector opencv --out {o}.pts", "--detector: expected one of dlib, mediapipe, found 'opencv'"),
     # reproduction
     ("animate2d {d}/template --out {o}", "track.npz"),
     ("animate2d {d}/capture --image {d}/cartoon.png --out {o}", "--image and --landmarks"),

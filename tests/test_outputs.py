@@ -77,6 +77,7 @@ COMMANDS = {
     "register": ({"S": "scans", "T": "target.obj", "A": "scan_lm.json", "B": "tmpl_lm.json"},
                  "register {S} --template {T} --landmarks {A} {B} --out {OUT}"),
     "capture": ({"V": "frames", "L": "first.pts"}, "capture {V} --landmarks {L} --out {OUT}"),
+    "landmarks": ({"V": "clip.mp4"}, "landmarks {V} --out {OUT}"),
     "animate2d": ({"C": "cap", "I": "cartoon.png", "L": "cartoon.pts"},
                   "animate2d {C} --image {I} --landmarks {L} --out {OUT}"),
     "animate3d": ({"C": "cap", "M": "mesh.obj", "L": "indices.json"},

@@ -13,6 +13,21 @@ feature points as vertices. We build it as follows:
    boundary vertex is a landmark (then the harmonic initialisation, eq. 7-9, has Dirichlet values on
    the whole boundary and reproduces affine motions exactly).
 
+Coincident and nearly coincident landmarks (beyond the paper). A closed mouth makes dlib put the
+upper and lower inner-lip points (61/67, 62/66, 63/65) on one pixel; Qhull keeps only one of two
+equal points, and nearly equal ones give sliver triangles across the lip line that fold as soon as
+the mouth opens. When an opposite inner-lip pair is closer than :data:`CLOSED_LIP_GAP` ``h``, the
+mesh is therefore cut open along the lip line: the triangulation is made with every inner-lip point
+moved :data:`LIP_SPLIT` of the way towards its outer-lip partner across the same lip (61-63 -> 50-52,
+65-67 -> 56-58), the triangles inside the inner-lip polygon (the mouth opening) are dropped, and the
+true positions are put back. The upper lip's triangles then use only upper inner-lip points and the
+lower lip's only lower ones, so coincident points share no triangle and the mouth can open (the
+inner-lip follower of :mod:`.lips` moves them apart). An open mouth on the first frame keeps its
+inside meshed as before. Any other landmark that coincides with an earlier one (within
+:data:`DUPLICATE_TOL` ``h``, e.g. the eyelids of a closed eye) is left out of the triangulation and
+kept as an isolated vertex: it is still tracked as a landmark, and the harmonic initialisation and
+the mesh refinement hold it (it is a control vertex), but no triangle uses it.
+
 Landmarks are vertices ``0 .. L-1``; grid points follow. Shewchuk's Triangle (and meshpy, which
 wraps it) is deliberately not used: its licence forbids commercial use. Delaunay from SciPy (Qhull)
 is BSD/MIT-style licensed.
@@ -20,13 +35,24 @@ is BSD/MIT-style licensed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from facebasis.errors import MeshError
 
-from .landmarks import face_width
+from .landmarks import INNER_LIP_PARTNERS, face_width
+
+#: an opposite inner-lip pair (61/67, 62/66, 63/65) closer than this many mesh spacings ``h`` counts as
+#: a closed mouth, and the mesh is cut open along the lip line
+CLOSED_LIP_GAP = 0.25
+#: fraction of the way from an inner-lip point to its outer-lip partner where the triangulation of a
+#: closed mouth places it (only the connectivity is taken from there)
+LIP_SPLIT = 0.35
+#: landmarks closer than this many ``h`` to an earlier landmark are duplicates (isolated vertices)
+DUPLICATE_TOL = 1e-3
+#: iBUG-68 opposite inner-lip pairs across the mouth
+INNER_LIP_PAIRS = ((61, 67), (62, 66), (63, 65))
 
 
 @dataclass(frozen=True)
@@ -39,12 +65,16 @@ class FaceMesh:
         Pixel positions on the first frame; rows ``0 .. L-1`` are the landmarks.
     faces : ndarray, shape (M, 3)
         Counter-clockwise (in x-right, y-down pixel coordinates: positive signed area) triangles.
+        A closed mouth is cut open (no triangle inside the inner-lip polygon 60-67); duplicate
+        landmarks are in no triangle (see the module notes).
     n_landmarks : int
         ``L``.
     boundary : ndarray, shape (B,)
         Landmark indices of the boundary polygon, in order.
     spacing : float
         Grid spacing ``h`` in pixels.
+    isolated : ndarray, shape (D,)
+        Landmarks left out of the triangulation as duplicates of an earlier landmark (module notes).
     """
 
     vertices: np.ndarray
@@ -52,6 +82,24 @@ class FaceMesh:
     n_landmarks: int
     boundary: np.ndarray
     spacing: float
+    isolated: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+def closed_mouth(landmarks: np.ndarray, spacing: float) -> bool:
+    """True if an iBUG-68 opposite inner-lip pair is closer than ``CLOSED_LIP_GAP * spacing``."""
+    lm = np.asarray(landmarks, float)
+    if len(lm) != 68:
+        return False
+    a, b = np.array(INNER_LIP_PAIRS).T
+    return bool(np.linalg.norm(lm[a] - lm[b], axis=1).min() < CLOSED_LIP_GAP * spacing)
+
+
+def duplicate_landmarks(landmarks: np.ndarray, tol: float) -> np.ndarray:
+    """Indices (D,) of landmarks within ``tol`` of a landmark with a smaller index."""
+    lm = np.asarray(landmarks, float)
+    d = np.sqrt(((lm[:, None] - lm[None]) ** 2).sum(-1))
+    close = np.tril(d <= tol, -1)   # (i, j) with j < i
+    return np.flatnonzero(close.any(1))
 
 
 def boundary_polygon(landmarks: np.ndarray) -> np.ndarray:
@@ -64,7 +112,8 @@ def boundary_polygon(landmarks: np.ndarray) -> np.ndarray:
     try:
         return ConvexHull(landmarks).vertices.astype(int)
     except Exception as exc:  # noqa: BLE001 - QhullError: collinear / coincident points
-        raise MeshError(f"landmarks: expected points spanning an area, found a degenerate set ({exc})") from None
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise MeshError(f"landmarks: expected points spanning an area, found a degenerate set ({first})") from None
 
 
 def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -123,6 +172,17 @@ def build_face_mesh(landmarks: np.ndarray, spacing: float | None = None) -> Face
         raise MeshError(f"mesh spacing: expected a positive number, found {spacing}")
     bidx = boundary_polygon(lm)
     poly = lm[bidx]
+    # connectivity positions: a closed mouth is opened along the lip line (module notes)
+    P = lm.copy()
+    hole = None
+    if closed_mouth(lm, h):
+        inner = np.array(sorted(INNER_LIP_PARTNERS))
+        outer = np.array([INNER_LIP_PARTNERS[i] for i in inner])
+        P[inner] += LIP_SPLIT * (lm[outer] - lm[inner])
+        hole = P[60:68]
+    dup = duplicate_landmarks(P, DUPLICATE_TOL * h)
+    keep_lm = np.ones(L, bool)
+    keep_lm[dup] = False
     lo, hi = poly.min(0), poly.max(0)
     dy = h * np.sqrt(3) / 2
     ys = np.arange(lo[1] + dy / 2, hi[1], dy)
@@ -135,16 +195,24 @@ def build_face_mesh(landmarks: np.ndarray, spacing: float | None = None) -> Face
         d_lm = np.sqrt(((grid[:, None] - lm[None]) ** 2).sum(-1)).min(1)
         d_edge = distance_to_segments(grid, poly, np.roll(poly, -1, axis=0))
         grid = grid[(d_lm > 0.6 * h) & (d_edge > 0.6 * h)]
+    lm_ids = np.flatnonzero(keep_lm)
     for _ in range(10):
         V = np.concatenate([lm, grid])
+        PV = np.concatenate([P, grid])
+        ids = np.r_[lm_ids, L + np.arange(len(grid))]       # vertices given to Qhull
         try:
-            tri = Delaunay(V)
-        except Exception as exc:  # noqa: BLE001 - QhullError
-            raise MeshError(f"landmarks: Delaunay triangulation failed ({exc})") from None
-        F = tri.simplices.astype(np.int64)
-        cen = V[F].mean(1)
-        F = F[points_in_polygon(cen, poly)]
-        area = signed_areas(V, F)
+            tri = Delaunay(PV[ids])
+        except Exception as exc:  # noqa: BLE001 - QhullError: its multi-line report is not repeated
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise MeshError(f"landmarks: expected points spanning an area, Delaunay triangulation failed "
+                            f"({first})") from None
+        F = ids[tri.simplices.astype(np.int64)]
+        cen = PV[F].mean(1)
+        inside = points_in_polygon(cen, poly)
+        if hole is not None:
+            inside &= ~points_in_polygon(cen, hole)
+        F = F[inside]
+        area = signed_areas(PV, F)
         keep = np.abs(area) > 1e-6 * h * h
         F = F[keep]
         area = area[keep]
@@ -156,13 +224,20 @@ def build_face_mesh(landmarks: np.ndarray, spacing: float | None = None) -> Face
         grid = np.delete(grid, bad - L, axis=0)
     else:
         raise MeshError("face mesh: could not make every boundary vertex a landmark")
+    if hole is not None:   # the true lip positions back: no triangle may fold
+        true_area = signed_areas(V, F)
+        if np.any(true_area <= 1e-6 * h * h):
+            raise MeshError("face mesh: the closed mouth could not be cut open without folding a triangle "
+                            "(inner-lip points 61-67 lie outside the outer lip 48-59?)")
     used = np.zeros(len(V), bool)
     used[F.ravel()] = True
-    if not used[:L].all():
-        miss = np.flatnonzero(~used[:L])
-        raise MeshError(f"face mesh: landmarks {miss.tolist()} are in no triangle (duplicate or outside points?)")
+    if not used[lm_ids].all():
+        miss = lm_ids[~used[lm_ids]]
+        raise MeshError(f"face mesh: landmarks {miss.tolist()} are in no triangle (outside the face outline "
+                        f"jaw 0-16 + brows 17-26?)")
+    used[:L] = True   # duplicates stay as isolated landmark vertices
     remap = np.cumsum(used) - 1  # drop grid points left in no triangle
-    return FaceMesh(V[used], remap[F], L, bidx, h)
+    return FaceMesh(V[used], remap[F], L, bidx, h, dup.astype(np.int64))
 
 
 def mesh_edges(F: np.ndarray) -> np.ndarray:

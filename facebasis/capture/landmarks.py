@@ -193,6 +193,15 @@ def validate_landmarks(pts, source: str = "landmarks", expected: int | None = No
         raise InputError(f"{source}: expected at least 3 points, found {len(pts)}")
     if not np.all(np.isfinite(pts)):
         raise InputError(f"{source}: expected finite coordinates, found NaN or infinity")
+    # a face mesh needs points spanning an area: all-equal or collinear points are refused here, in
+    # one line, instead of as Qhull's multi-line report from the triangulation
+    c = pts - pts.mean(0)
+    sv = np.linalg.svd(c, compute_uv=False)
+    if sv[0] <= 1e-9 * max(1.0, float(np.abs(pts).max())):
+        raise InputError(f"{source}: expected points spanning an area, found all {len(pts)} points at "
+                         f"x={pts[0, 0]:g}, y={pts[0, 1]:g}")
+    if sv[1] <= 1e-6 * sv[0]:
+        raise InputError(f"{source}: expected points spanning an area, found all {len(pts)} points on one line")
     if size is not None:
         w, h = size
         bad = np.flatnonzero((pts[:, 0] < 0) | (pts[:, 0] > w - 1) | (pts[:, 1] < 0) | (pts[:, 1] > h - 1))

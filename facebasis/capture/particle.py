@@ -170,7 +170,8 @@ class CondensationFilter:
         return np.maximum(ncc(patches, self.template0), ncc(patches, self.template))
 
     def step(self, image: np.ndarray, measured: np.ndarray, measured_ok: np.ndarray,
-             detections: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+             detections: np.ndarray | None = None,
+             detection_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Advance one frame.
 
         Parameters
@@ -183,6 +184,10 @@ class CondensationFilter:
             LK status and forward-backward check.
         detections : ndarray, shape (L, 2), optional
             Detected landmarks in the new frame (extra observations); rows of NaN are ignored.
+        detection_sigma : ndarray, shape (L,), optional
+            Standard deviation of each detection in pixels (the detector's measured noise, see
+            :class:`facebasis.capture.detect.DetectionNoise`); default ``detection_sigma`` of the
+            options times the face scale.
 
         Returns
         -------
@@ -222,7 +227,9 @@ class CondensationFilter:
             det = np.asarray(detections, float)
             dvalid = np.all(np.isfinite(det), axis=1)
             dd2 = ((mu - np.where(dvalid[:, None], det, 0.0)[:, None, :]) ** 2).sum(-1)
-            logw = logw - np.where(dvalid[:, None], dd2 / (2 * (o.detection_sigma * s) ** 2), 0.0)
+            sd2 = ((o.detection_sigma * s) ** 2 if detection_sigma is None
+                   else np.asarray(detection_sigma, float)[:, None] ** 2)
+            logw = logw - np.where(dvalid[:, None], dd2 / (2 * sd2), 0.0)
         logw = logw - logw.max(1, keepdims=True)
         w = np.exp(logw)
         w /= w.sum(1, keepdims=True)

@@ -150,6 +150,7 @@ class FaceTracker:
         self._V = self.mesh.vertices.copy()
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
+        self.lk_motion = np.zeros_like(lm)   # LK's motion of the landmarks in the last frame
 
     def _follow_lips(self, lm: np.ndarray, detections: np.ndarray | None) -> np.ndarray:
         """Place the inner-lip points on their outer-lip partners (``inner_lips="follow"``)."""
@@ -170,7 +171,8 @@ class FaceTracker:
             self.filter.place(self._inner, out[self._inner])
         return out
 
-    def track(self, frame: np.ndarray, detections: np.ndarray | None = None) -> FrameResult:
+    def track(self, frame: np.ndarray, detections: np.ndarray | None = None,
+              detection_sigma: np.ndarray | None = None) -> FrameResult:
         """Track the next frame.
 
         Parameters
@@ -179,6 +181,9 @@ class FaceTracker:
             Same size as the first frame.
         detections : ndarray, shape (L, 2), optional
             Per-frame detected landmarks used as extra filter observations (rows of NaN ignored).
+        detection_sigma : ndarray, shape (L,), optional
+            Their standard deviation in pixels (measured by
+            :class:`facebasis.capture.detect.DetectionNoise`); default: the filter option.
 
         Returns
         -------
@@ -195,9 +200,10 @@ class FaceTracker:
         if self.filter is not None:
             ok = lk.ok.copy()
             ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
-            lm, lost = self.filter.step(gray, lk.points, ok, detections)
+            lm, lost = self.filter.step(gray, lk.points, ok, detections, detection_sigma)
         else:
             lm, lost = lk.points, ~lk.ok
+        self.lk_motion = lk.points - self._lm   # LK's own motion of the landmarks (detection noise estimate)
         lost = np.asarray(lost, bool).copy()
         lost[self._inner] = lost[self._partner]
         lm = np.clip(self._follow_lips(lm, detections), 0, [self.size[0] - 1, self.size[1] - 1])
@@ -335,6 +341,14 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
                 raise InputError(f"--detector {getattr(det, 'name', det)}: expected a face on the first frame of "
                                  f"{src.path}, found none")
         tracker = FaceTracker(first, lm0, options)
+        noise = None
+        if det is not None and detections_as_observations:
+            from .detect import DetectionNoise
+
+            fo = options.filter
+            noise = DetectionNoise(tracker.L, prior=fo.detection_sigma * tracker.scale,
+                                   floor=fo.measurement_sigma * tracker.scale)
+            noise.update(lm0, np.zeros_like(lm0))
         writer = None
         if stage is not None and overlay:
             from .overlay import OverlayWriter, draw_overlay
@@ -360,7 +374,9 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
                     d = det.detect(frame, near=lms[-1])
                     secs["detect"] += time.perf_counter() - t
                     dets = d if d is not None and len(d) == tracker.L else None
-                res = tracker.track(frame, dets)
+                res = tracker.track(frame, dets, None if noise is None else noise.sigma)
+                if noise is not None:
+                    noise.update(dets, tracker.lk_motion, res.landmarks)
                 lms.append(res.landmarks)
                 Vs.append(res.vertices)
                 losts.append(res.lost)

@@ -3,13 +3,21 @@
 A :class:`FrameSource` is opened and checked up front (first frame decoded, frame rate and size
 known) and then iterated as a generator of RGB ``uint8`` arrays of shape ``(height, width, 3)``,
 one at a time, so memory does not grow with the length of the video.
+
+What a container announces is not always what decodes: a cut file (a faststart mp4 cut in half)
+announces its full length and stops early, sometimes with a decoding error. The frames decoded so
+far are kept; :attr:`FrameSource.stats` counts them and a :class:`VideoWarning` says how many of the
+announced frames were decoded. A frame of another size than the first stops the run with an
+:class:`~facebasis.errors.InputError` naming the frame; for image folders every file's size is
+checked up front from its header.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +26,10 @@ from facebasis.errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 DEFAULT_FOLDER_FPS = 25.0
+
+
+class VideoWarning(UserWarning):
+    """A video decoded fewer frames than its container announced (the frames decoded are used)."""
 
 
 @dataclass(frozen=True)
@@ -38,6 +50,9 @@ class FrameSource:
         Frame count if known up front (always for folders; from the container for videos).
     files : tuple of Path
         The sorted image files (folders only).
+    stats : dict
+        Filled by :meth:`frames`: ``decoded`` (frames yielded by the last pass), ``complete`` (the
+        pass reached the end of the input), ``error`` (the decoding error that ended it early, or None).
     """
 
     path: Path
@@ -46,14 +61,41 @@ class FrameSource:
     size: tuple[int, int]
     n_frames: int | None
     files: tuple = ()
+    stats: dict = field(default_factory=dict, compare=False, repr=False)
 
     def frames(self, max_frames: int | None = None) -> Iterator[np.ndarray]:
-        """Yield RGB frames, shape ``(height, width, 3)`` uint8, at most ``max_frames`` of them."""
-        gen = _video_frames(self.path) if self.kind == "video" else _image_frames(self.files, self.size)
+        """Yield RGB frames, shape ``(height, width, 3)`` uint8, at most ``max_frames`` of them.
+
+        Warns (:class:`VideoWarning`) when a video ends before the frame count its container
+        announced; raises :class:`~facebasis.errors.InputError` on a frame of another size.
+        """
+        self.stats.clear()
+        self.stats.update(decoded=0, complete=False, error=None)
+        gen = (_video_frames(self.path, self.size, self.stats) if self.kind == "video"
+               else _image_frames(self.files, self.size))
         for i, fr in enumerate(gen):
             if max_frames is not None and i >= max_frames:
-                break
+                return
+            self.stats["decoded"] = i + 1
             yield fr
+        self.stats["complete"] = True
+        msg = self.shortfall()
+        if msg:
+            warnings.warn(msg, VideoWarning, stacklevel=2)
+
+    def shortfall(self) -> str | None:
+        """Warning text if the last full pass decoded fewer frames than announced, else None."""
+        st = self.stats
+        if self.kind != "video" or not st.get("complete"):
+            return None
+        n, announced = st["decoded"], self.n_frames
+        if announced and n < announced:
+            why = f" (decoding stopped: {st['error']})" if st.get("error") else ""
+            return (f"video {self.path}: decoded {n} frames, its container announced {announced}; "
+                    f"the file is probably cut short{why}; tracking the {n} decoded frames")
+        if st.get("error"):
+            return f"video {self.path}: decoding stopped after {n} frames ({st['error']}); tracking those"
+        return None
 
     def __iter__(self):
         return self.frames()
@@ -79,14 +121,41 @@ def _image_frames(files, size) -> Iterator[np.ndarray]:
         yield img
 
 
-def _video_frames(path: Path) -> Iterator[np.ndarray]:
+def _video_frames(path: Path, size=None, stats=None) -> Iterator[np.ndarray]:
     import av
 
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
-        for frame in container.decode(stream):
+        it = container.decode(stream)
+        i = 0
+        while True:
+            try:
+                frame = next(it)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - PyAV's decoding errors (InvalidDataError, ...)
+                if i == 0:
+                    raise InputError(f"video {path}: cannot decode it ({type(exc).__name__}: {exc})") from None
+                if stats is not None:
+                    stats["error"] = f"{type(exc).__name__}: {exc}"
+                return
+            if size is not None and (frame.width, frame.height) != tuple(size):
+                raise InputError(f"video {path}: expected every frame {size[0]} x {size[1]} like the first, "
+                                 f"found frame {i} (counting from 0) {frame.width} x {frame.height}")
             yield frame.to_ndarray(format="rgb24")
+            i += 1
+
+
+def _image_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from an image file's header (Pillow reads no pixels here), or None."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return int(im.size[0]), int(im.size[1])
+    except Exception:  # noqa: BLE001 - unreadable: left to the decoder, which names the file
+        return None
 
 
 def open_frames(path: str | os.PathLike, fps: float | None = None) -> FrameSource:
@@ -122,6 +191,12 @@ def open_frames(path: str | os.PathLike, fps: float | None = None) -> FrameSourc
         first = _read_image(files[0])
         if first is None:
             raise InputError(f"image {files[0]}: cannot decode it as an image")
+        size0 = (int(first.shape[1]), int(first.shape[0]))
+        for k, f in enumerate(files[1:], 1):   # headers only: cheap, and the run never starts on a mixed folder
+            sz = _image_size(f)
+            if sz is not None and sz != size0:
+                raise InputError(f"image {f}: expected size {size0[0]} x {size0[1]} like the first image "
+                                 f"{files[0].name}, found {sz[0]} x {sz[1]} (frame {k}, counting from 0)")
         return FrameSource(p, "images", float(fps or DEFAULT_FOLDER_FPS),
                            (int(first.shape[1]), int(first.shape[0])), len(files), files)
     import av
@@ -161,3 +236,38 @@ def to_gray(frame: np.ndarray) -> np.ndarray:
     if a.ndim == 3:
         a = a[..., :3] @ np.array([0.299, 0.587, 0.114], np.float32)
     return a
+
+
+def read_frame(path: str | os.PathLike, index: int = 0) -> np.ndarray:
+    """One frame of a video, an image folder or a single image file, RGB ``(H, W, 3)`` uint8.
+
+    Parameters
+    ----------
+    path : path-like
+        Video file, image folder (sorted by name) or one image (png, jpg, ...).
+    index : int
+        Frame number, counting from 0 (must be 0 for a single image).
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable input, or no frame ``index`` in it.
+    """
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+        raise InputError(f"--frame: expected a frame number >= 0, found {index!r}")
+    p = Path(path)
+    if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES:
+        img = _read_image(p)
+        if img is None:
+            raise InputError(f"image {p}: cannot decode it as an image")
+        if index != 0:
+            raise InputError(f"--frame: expected 0 for the single image {p}, found {index}")
+        return img
+    src = open_frames(p)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", VideoWarning)
+        for i, fr in enumerate(src.frames(index + 1)):
+            if i == index:
+                return fr
+    raise InputError(f"--frame: expected a frame number below the {src.stats.get('decoded', 0)} frames "
+                     f"decoded from {p}, found {index}")

@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from .outputs import Outputs
 
 DESCRIPTION = """\
 Track a face through a video file or a folder of images (sorted by name).
 Give the face's landmarks on the first frame with --landmarks (an iBUG .pts file
-or a JSON list of [x, y] pairs, in pixels) or let a detector find them with
---detector dlib (needs the optional packages: pip install 'facebasis[detect]').
-A triangle mesh is laid over the face and tracked with it.
+or a JSON list of [x, y] pairs, in pixels; 'facebasis landmarks' writes one) or let a
+detector find them with --detector mediapipe (Apache-2.0 model shipped in its wheel:
+pip install 'facebasis[mediapipe]') or --detector dlib (pip install 'facebasis[detect]';
+its model carries iBUG 300-W's non-commercial terms). With a detector, every frame's
+detection also corrects the track's drift, weighed by the detector's noise measured
+on the video. A triangle mesh is laid over the face and tracked with it.
 
 Writes OUT_DIR/track.npz (landmark and mesh-vertex positions per frame, mesh
 triangles, frame rate, frame size, lost-point flags), OUT_DIR/landmarks.csv and,
@@ -39,7 +43,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument("input", metavar="VIDEO_OR_DIR", help="video file (mp4, avi, ...) or folder of png/jpg images")
     p.add_argument("--landmarks", metavar="FIRST.pts",
                    help="landmarks on the first frame: iBUG .pts file or JSON [[x, y], ...] (pixels)")
-    p.add_argument("--detector", metavar="NAME", help="detect the landmarks instead; NAME is dlib")
+    p.add_argument("--detector", metavar="NAME",
+                   help="detect the landmarks instead, and use every frame's detection against drift: "
+                        "mediapipe or dlib")
     p.add_argument("--out", required=True, metavar="OUT_DIR", help="output folder (replaced only on success)")
     p.add_argument("--max-frames", type=str, default=None, metavar="N", help="stop after N frames")
     p.add_argument("--no-overlay", action="store_true", help="do not write overlay.mp4")
@@ -52,11 +58,14 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "patch that LK cannot split; 'track' tracks the lip line itself (the mouth may not open)")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     p.set_defaults(func=cmd_capture, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("input", "landmarks")))
+    register_landmarks(subparsers)
     return p
 
 
 def cmd_capture(args) -> int:
     """Run ``facebasis capture``; every user error is raised as a FacebasisError before work starts."""
+    import warnings
+
     from tqdm import tqdm
 
     from facebasis.capture.tracker import (
@@ -65,6 +74,7 @@ def cmd_capture(args) -> int:
         capture,
         check_capture_args,
     )
+    from facebasis.capture.video import VideoWarning
     from facebasis.errors import InputError
 
     if args.inner_lips not in INNER_LIPS:
@@ -79,19 +89,100 @@ def cmd_capture(args) -> int:
             bar.update(done - bar.n)
 
     try:
-        res = capture(src, landmarks=lm, detector=det, out=args.out, max_frames=max_frames,
-                      overlay=not args.no_overlay, progress=progress,
-                      options=TrackerOptions(inner_lips=args.inner_lips))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", VideoWarning)
+            res = capture(src, landmarks=lm, detector=det, out=args.out, max_frames=max_frames,
+                          overlay=not args.no_overlay, progress=progress,
+                          options=TrackerOptions(inner_lips=args.inner_lips))
     finally:
         if bar is not None:
             bar.close()
+    for w in caught:
+        if issubclass(w.category, VideoWarning):
+            print(f"warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     cap = res.capture
     s = res.seconds
-    n_lost = int(cap.lost.any(axis=1).sum())
     print(f"tracked {cap.n_frames} frames, {cap.landmarks.shape[1]} landmarks, {cap.vertices.shape[1]} mesh vertices, "
           f"{len(cap.faces)} triangles")
-    print(f"frames with a lost landmark: {n_lost}")
+    print(lost_summary(cap.lost))
     print(f"time: decode {s['decode']:.1f} s, landmarks {s['landmarks']:.1f} s, mesh {s['mesh']:.1f} s, "
           f"detector {s['detect']:.1f} s, output {s['output']:.1f} s")
     print(f"wrote {res.out}")
+    return 0
+
+
+def lost_summary(lost) -> str:
+    """One line on the lost-point flags ``(T, L)``: frames with any lost point and the mean count per frame.
+
+    A landmark is 'lost' for a frame when its Lucas-Kanade measurement was rejected and the filter
+    carried it; a point or two per frame is normal, so both figures are printed.
+    """
+    import numpy as np
+
+    lost = np.asarray(lost, bool)
+    T, L = lost.shape
+    per_frame = lost.sum(1)
+    return (f"lost landmarks (Lucas-Kanade rejected, carried by the filter): {per_frame.mean():.1f} of {L} "
+            f"per frame on average; {int((per_frame > 0).sum())} of {T} frames had at least one")
+
+
+def _frame_number(text: str) -> int:
+    from facebasis.errors import InputError
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise InputError(f"--frame: expected a frame number >= 0, found {text!r}") from None
+    if v < 0:
+        raise InputError(f"--frame: expected a frame number >= 0, found {v}")
+    return v
+
+
+LANDMARKS_DESCRIPTION = """Detect the 68 iBUG landmarks on one frame (the first, or --frame N counting from 0)
+of a video, an image folder or a single image, and write them as an iBUG .pts file
+that 'facebasis capture --landmarks' reads. --detector mediapipe (Apache-2.0, pip
+install 'facebasis[mediapipe]') or dlib (pip install 'facebasis[detect]'); by default
+the first of the two that is installed. From a clone: pip install '.[mediapipe]'.
+The .pts is plain text, one 'x y' line per point in iBUG order (pixels, x right, y
+down): correct a point by editing its line (README, "Correcting first-frame landmarks").
+"""
+
+
+def register_landmarks(subparsers) -> argparse.ArgumentParser:
+    """Add the ``landmarks`` subcommand."""
+    p = subparsers.add_parser(
+        "landmarks", help="write a frame's 68 landmarks (.pts) from a detector, for capture --landmarks",
+        description=LANDMARKS_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", metavar="VIDEO_OR_IMAGE", help="video file, image file or folder of images")
+    p.add_argument("--out", required=True, metavar="FIRST.pts", help="the .pts file to write")
+    p.add_argument("--detector", default=None, metavar="NAME",
+                   help="mediapipe or dlib (default: the first of them that is installed)")
+    p.add_argument("--frame", default="0", metavar="N", help="frame number, counting from 0 (default 0)")
+    p.set_defaults(func=cmd_landmarks, outputs=Outputs(writes=(("out", "file", "--out"),), reads=("input",)))
+    return p
+
+
+def cmd_landmarks(args) -> int:
+    """Run ``facebasis landmarks``: checks every argument, then detects and writes the .pts."""
+    from pathlib import Path
+
+    from facebasis.atomic import atomic_write_bytes
+    from facebasis.capture.detect import detect_landmarks
+    from facebasis.capture.landmarks import format_pts
+    from facebasis.errors import InputError
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".pts":
+        raise InputError(f"--out: expected a file name ending in .pts, found {str(out)!r}")
+    if out.is_dir():
+        raise InputError(f"--out {out}: expected a file name, found a folder")
+    if not Path(args.input).exists():
+        raise InputError(f"input {args.input}: expected a video file, an image or an image folder, found nothing")
+    index = _frame_number(args.frame)
+    pts, name = detect_landmarks(args.input, args.detector, index)
+    atomic_write_bytes(out, format_pts(pts).encode())
+    print(f"{name}: {len(pts)} landmarks on frame {index} of {args.input}")
+    print(f"wrote {out}")
     return 0

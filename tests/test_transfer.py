@@ -6,7 +6,7 @@ from conftest import bumpy_sheet, requires_ict
 
 from facebasis import DeformationTransfer, Rig, deformation_transfer
 from facebasis.defaults.face import default_person, default_template
-from facebasis.errors import MeshError, TopologyError
+from facebasis.errors import MeshError, RigError, TopologyError
 
 
 def sheet_rig():
@@ -149,3 +149,23 @@ def test_ict_transfer_onto_own_neutral_is_exact():
     rig = ict_rig()
     out = DeformationTransfer(rig, rig.neutral).transfer()
     assert np.linalg.norm(out.deltas - rig.deltas) / np.linalg.norm(rig.deltas) <= 1e-6
+
+
+def test_an_unknown_shape_name_suggests_the_near_one():
+    from facebasis.defaults.face import default_template
+
+    rig = default_template()
+    with pytest.raises(RigError, match=r"unknown blendshape names \['jawOpem'\]; did you mean 'jawOpen' for 'jawOpem'\?"):
+        rig.index(["jawOpem"])
+    with pytest.raises(RigError, match=r"unknown blendshape names \['zzz'\]; expected names of .* \(\d+\): jawOpen"):
+        rig.index(["zzz"])
+
+
+def test_version_flag(capsys):
+    from facebasis import __version__
+    from facebasis.cli import main
+
+    for flag in ("-V", "--version"):
+        with pytest.raises(SystemExit) as exc:
+            main([flag])
+        assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"facebasis {__version__}"

@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
     parser = _Parser(prog="facebasis", description=DESCRIPTION)
-    parser.add_argument("--version", action="version", version=f"facebasis {__version__}")
+    parser.add_argument("-V", "--version", action="version", version=f"facebasis {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in GROUPS:
         group.register(sub)

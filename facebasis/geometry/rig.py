@@ -78,14 +78,20 @@ class Rig:
         return len(self.names)
 
     def index(self, names: Sequence[str], what: str = "shape names") -> np.ndarray:
-        """Indices of ``names``; :class:`RigError` listing the unknown ones and the known ones."""
+        """Indices of ``names``; :class:`RigError` naming the unknown ones with the nearest known name
+        of each (``jawOpem``: did you mean ``jawOpen``?), or the known ones when none is near."""
+        import difflib
+
         lookup = {s: i for i, s in enumerate(self.names)}
         unknown = [s for s in names if s not in lookup]
         if unknown:
-            raise RigError(
-                f"{what}: unknown blendshape names {unknown}; expected names of {self.source}: "
-                f"{list(self.names)}"
-            )
+            near = {s: difflib.get_close_matches(s, self.names, n=1, cutoff=0.75) for s in unknown}
+            if all(near.values()):
+                hint = "; did you mean " + ", ".join(f"{near[s][0]!r} for {s!r}" for s in unknown) + "?"
+            else:
+                shown = list(self.names[:12]) + (["..."] if self.n_shapes > 12 else [])
+                hint = f"; expected names of {self.source} ({self.n_shapes}): {', '.join(shown)}"
+            raise RigError(f"{what}: unknown blendshape names {unknown}{hint}")
         return np.array([lookup[s] for s in names], dtype=np.int64)
 
     def shape(self, name: str) -> np.ndarray:

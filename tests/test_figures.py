@@ -81,7 +81,9 @@ def test_rig_report_figures_tables_and_index(rig_run, tmp_path, linted):
     weights = (out / "weights_table.csv").read_text().splitlines()
     assert len(weights) == 5 and weights[0].startswith("example,")
     index = (out / "index.md").read_text()
-    assert index.startswith("# Rig run report: `../../") and "## Key numbers" in index and "E_fit" in index
+    assert index.startswith(f"# Rig run report: {rig_run.name}\n") and "## Key numbers" in index and "E_fit" in index
+    assert "folder `../../" in index  # the run, relative to the report
+    assert "max bound violation -0" not in index
     assert str(tmp_path) not in index and "/" + tmp_path.parts[1] not in index  # no absolute path
     linked = re.findall(r"\]\(([^)]+)\)", index)
     assert set(linked) == {p.name for p in out.iterdir() if p.name != "index.md"}

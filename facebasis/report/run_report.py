@@ -100,13 +100,13 @@ def _run_index(run: Path, out: Path, history: dict, residuals: dict, paths: list
            f"max {max(r.values()):.3g} ({max(r, key=r.get)}); threshold {residuals['threshold']:.3g}; missing: "
            f"{', '.join(residuals.get('missing', [])) or 'none'}.",
            f"- Certified weights: max |x_a x_b| {max(h['max_complementarity'] for h in its):.3g}, max bound violation "
-           f"{max(h['max_bound_violation'] for h in its):.3g}; IPOPT statuses: "
+           f"{max(0.0, max(h['max_bound_violation'] for h in its)):.3g}; IPOPT statuses: "
            f"{', '.join(sorted(set(h.get('ipopt_status', '?') for h in its)))}."]
     existing = [p for p in dict.fromkeys(paths) if p.is_file() and p.parent.resolve() == out.resolve()]
     figs, tabs = {}, {}
     for p in existing:
         (figs if p.suffix in (".png", ".pdf", ".svg") else tabs).setdefault(p.stem, []).append(p.name)
-    lines = [f"# Rig run report: `{_rel(run, written_as or out)}`", "",
+    lines = [f"# Rig run report: {Path(run).resolve().name}", "",
              f"Figures and tables of the `facebasis rig` output folder `{_rel(run, written_as or out)}` (relative to this file), "
              "made by `facebasis report` from its history.json, weights.json and residuals.json.", "",
              "## Key numbers", ""] + key + ["", "## Figures", "", "| figure | what it shows |", "|---|---|"]

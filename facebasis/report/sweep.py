@@ -73,11 +73,13 @@ def sweep_report(rows, out, formats=FORMATS) -> list[Path]:
                                    ("train_error", "s--", "training expressions")):
             m, s = _mean_std(rs, metric, key, xs)
             ax.errorbar(xs, m, yerr=s if n_seeds > 1 else None, fmt=style, ms=4, capsize=2, label=lab)
+            if metric == "heldout_error" and np.isfinite(m).any():  # the minimum, read off the curve itself
+                i = int(np.nanargmin(m))
+                ax.plot([xs[i]], [m[i]], marker="*", ms=11, color="tab:red", ls="none",
+                        label=f"lowest held-out error ({m[i]:.3g} at {xs[i]:.3g})")
         dt = [r["heldout_error"] for r in _rows(rows, "methods") if r["method"] == "deformation transfer"]
         if dt:
             ax.axhline(float(np.mean(dt)), color="0.4", ls=":", lw=1, label="deformation transfer (held-out)")
-        if study == "alpha":
-            ax.axvspan(min(xs), 0.05, color="tab:red", alpha=0.08, label=r"$\alpha < 0.05$ (seed 000: overfitting)")
         ax.set_xscale("log")
         ax.set_xlabel(label)
         ax.set_ylabel(unit("relative error", DIMENSIONLESS))

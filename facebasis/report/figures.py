@@ -287,12 +287,18 @@ def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path
 
 
 def virtual_edges_figure(V, F, edges, path: Path, views=("front", "below"), title: str = "", formats=("png",)):
-    """The mesh with its virtual edges drawn as red segments, whole face and zoomed on the edges."""
+    """The mesh with its virtual edges, whole face and zoomed on the edges. Edges are coloured by
+    their length (the gap they span, mesh units) and drawn translucent, more so the more there are,
+    so that thousands of edges across a mouth read as a density, not as a solid red patch."""
     from matplotlib.collections import LineCollection
 
     plt = _pyplot()
     E = np.asarray(edges, np.int64).reshape(-1, 2)
+    length = np.linalg.norm(np.asarray(V)[E[:, 0]] - np.asarray(V)[E[:, 1]], axis=1) if len(E) else np.zeros(0)
+    alpha = float(np.clip(25.0 / np.sqrt(max(len(E), 1)), 0.1, 0.9))
+    norm = plt.Normalize(float(length.min()), float(length.max()) or 1.0) if len(E) else None
     fig, axes = plt.subplots(len(views), 2, figsize=(PAGE, 3.2 * len(views)), squeeze=False)
+    lines = None
     for row, view in enumerate(views):
         P = project(V, view)
         for j, zoom in enumerate((False, True)):
@@ -305,7 +311,11 @@ def virtual_edges_figure(V, F, edges, path: Path, views=("front", "below"), titl
             draw_mesh(ax, V, F, view=view, crop=crop)
             if len(E):
                 seg = np.stack([P[E[:, 0], :2], P[E[:, 1], :2]], 1)
-                ax.add_collection(LineCollection(seg, colors=(0.85, 0.05, 0.05), linewidths=0.6 if zoom else 0.3))
+                lines = LineCollection(seg, cmap="plasma", norm=norm, alpha=alpha, linewidths=0.6 if zoom else 0.3)
+                lines.set_array(length)
+                ax.add_collection(lines)
             ax.set_title(f"{view}{' (zoom)' if zoom else ''}")
+    if lines is not None:
+        fig.colorbar(lines, ax=axes.ravel().tolist(), fraction=0.03, pad=0.02).set_label("edge length (mesh units)")
     fig.suptitle(title or f"{len(E)} virtual edges")
     return save(fig, path, formats)

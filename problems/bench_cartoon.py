@@ -47,7 +47,7 @@ def target_images(detector):
     face = default_cartoon()
     out = [("cartoon", face.image, face.landmarks)]
     wide = cv2.resize(face.image, (int(round(1.3 * 512)), 512), interpolation=cv2.INTER_AREA)
-    out.append(("cartoon-wide", wide, face.landmarks * [1.3 * 512 / 512 * (wide.shape[1] / (1.3 * 512)), 1.0]))
+    out.append(("cartoon-wide", wide, face.landmarks * [wide.shape[1] / 512.0, 1.0]))
     try:
         from skimage import data
 
@@ -69,8 +69,10 @@ def features(lm):
     iod = np.linalg.norm(lm[45] - lm[36])
     mouth_open = np.linalg.norm(lm[[61, 62, 63]] - lm[[67, 66, 65]], axis=1).mean()
     mouth_w = np.linalg.norm(lm[54] - lm[48])
-    brow = (np.linalg.norm(lm[17:22].mean(0) - lm[36:42].mean(0)) + np.linalg.norm(lm[22:27].mean(0) - lm[42:48].mean(0))) / 2
-    eye = (np.linalg.norm(lm[[37, 38]] - lm[[41, 40]], axis=1).mean() + np.linalg.norm(lm[[43, 44]] - lm[[47, 46]], axis=1).mean()) / 2
+    brow = (np.linalg.norm(lm[17:22].mean(0) - lm[36:42].mean(0))
+            + np.linalg.norm(lm[22:27].mean(0) - lm[42:48].mean(0))) / 2
+    eye = (np.linalg.norm(lm[[37, 38]] - lm[[41, 40]], axis=1).mean()
+           + np.linalg.norm(lm[[43, 44]] - lm[[47, 46]], axis=1).mean()) / 2
     return np.array([mouth_open, mouth_w, brow, eye]) / iod
 
 
@@ -106,17 +108,18 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
     still = meshes if drive is None else drive.still
     folds_all = folds_per_frame(anim.warp_rest, np.concatenate([still, ring], 1), anim.warp_faces)
     width = np.linalg.norm(meshes[:, 16] - meshes[:, 0], axis=1)
-    t1 = time.perf_counter()
+    warp = 0.0
     frames = {}
     out_feats = []
     for t in range(T):
+        t1 = time.perf_counter()
         fr = anim.warp(meshes[t]) if drive is None else anim.frame_at(drive, t)
+        warp += time.perf_counter() - t1
         if t in png_frames:
             frames[t] = fr
         if detector is not None and t % check_every == 0:
             d = detector.detect(fr)
             out_feats.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
-    warp = time.perf_counter() - t1
     row = {"image": name, "mode": mode, "frames": T,
            "frames_fold_mesh": int(np.count_nonzero(folds_mesh)), "max_fold_mesh": int(folds_mesh.max()),
            "frames_fold_all": int(np.count_nonzero(folds_all)), "max_fold_all": int(folds_all.max()),

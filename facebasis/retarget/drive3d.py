@@ -196,7 +196,7 @@ class MeshDriver:
         D = self.handle_displacements(np.asarray(landmarks, np.float64))
         T, L = D.shape[:2]
         if self.head_mode == "follow":          # not linear in D any more: components of the whole motion
-            return self._morph_basis_frames(self.run(landmarks).vertices - self.V, tol)
+            return self._morph_basis_follow(landmarks, tol)
         H = D.reshape(T, -1)
         U, S, Vt = np.linalg.svd(H, full_matrices=False)
         limit = tol * float(np.linalg.norm(np.ptp(self.V, axis=0)))
@@ -217,20 +217,54 @@ class MeshDriver:
         names = [f"motion{k:02d}{sign}" for k in range(r) for sign in ("+", "-")]
         return targets, names, weights
 
-    def _morph_basis_frames(self, disp, tol):
-        """:meth:`morph_basis` for displacements (T, n, 3) given frame by frame (head "follow")."""
-        T, n = disp.shape[:2]
-        H = disp.reshape(T, -1)
-        U, S, Vt = np.linalg.svd(H, full_matrices=False)
+    def _morph_basis_follow(self, landmarks, tol):
+        """:meth:`morph_basis` with the head's similarity (head "follow").
+
+        A frame is ``V + (A_t - I)(V - c) + W (D_t A_t^T) + tau_t`` in x, y (z scaled by rho_t about
+        c): linear in the per-frame coefficients h_t = (D_t A_t^T, A_t - I, rho_t - 1, tau_t) over a
+        fixed lifted basis Phi (3n, 2L + 7). With Phi = QR, the SVD of ``h R^T`` (T, 2L + 7) gives the
+        components (rows of ``V^T Q^T``) without forming the (T, 3n) frames; the fewest are kept for
+        which every frame's displacement error (its norm, a bound on any vertex's) is within tol.
+        """
+        from .headmotion import stable_landmarks
+
+        lm = np.asarray(landmarks, np.float64)
+        motion = self.head_motion(lm)
+        D = self.handle_displacements(lm)                                   # (T, L, 2)
+        T, L = D.shape[:2]
+        n = len(self.V)
+        a = np.conj(motion.a)
+        A = np.stack([np.stack([a.real, -a.imag], -1), np.stack([a.imag, a.real], -1)], 1)   # (T, 2, 2)
+        E = np.einsum("tlj,tij->tli", D, A)                                 # D_t A_t^T
+        idx = stable_landmarks(len(self.lm0))
+        c0 = self.lm0[idx].mean(0)
+        moved = motion.a * complex(*c0) + motion.b - complex(*c0)
+        shift = self.scale * np.conj(moved)
+        cm = self.V[self.indices[idx]].mean(0)
+        rel = self.V - cm
+        k = 2 * L + 7
+        Phi = np.zeros((n, 3, k))
+        Phi[:, 0, 0:2 * L:2] = self.W                                       # E[:, l, x]
+        Phi[:, 1, 1:2 * L:2] = self.W                                       # E[:, l, y]
+        for i in range(2):                                                  # (A - I)[i, j] (V - c)_j
+            for j in range(2):
+                Phi[:, i, 2 * L + 2 * i + j] = rel[:, j]
+        Phi[:, 2, 2 * L + 4] = rel[:, 2]                                    # (rho - 1)(z - c_z)
+        Phi[:, 0, 2 * L + 5] = 1.0
+        Phi[:, 1, 2 * L + 6] = 1.0
+        h = np.concatenate([E.reshape(T, -1), (A - np.eye(2)).reshape(T, 4), (np.abs(a) - 1.0)[:, None],
+                            shift.real[:, None], shift.imag[:, None]], 1)
+        Q, R = np.linalg.qr(Phi.reshape(3 * n, k))
+        U, S, Vt = np.linalg.svd(h @ R.T, full_matrices=False)
         limit = tol * float(np.linalg.norm(np.ptp(self.V, axis=0)))
-        resid = H.copy()
-        r = 0
-        while r < len(S) and np.abs(resid).max() > limit:
-            resid -= np.outer(U[:, r] * S[r], Vt[r])
-            r += 1
-        coef = U[:, :r] * S[:r]
+        coef_all = U * S
+        # residual row norms for every r at once: the tail of the squared coefficients
+        tail = np.sqrt(np.maximum(np.cumsum((coef_all ** 2)[:, ::-1], axis=1)[:, ::-1], 0.0))   # (T, k')
+        ok = np.flatnonzero(np.r_[tail.max(0), 0.0] <= limit)
+        r = int(ok[0]) if len(ok) else len(S)
+        coef = coef_all[:, :r]
         m = np.abs(coef).max(axis=0) if r else np.zeros(0)
-        B = Vt[:r].reshape(r, n, 3)
+        B = (Vt[:r] @ Q.T).reshape(r, n, 3)
         targets = np.zeros((2 * r, n, 3))
         targets[0::2] = B * m[:, None, None]
         targets[1::2] = -B * m[:, None, None]

@@ -9,6 +9,14 @@ corresponding point (same barycentric coordinates) of that triangle on the rest 
 bilinearly (the paper's piecewise-affine warp with bilinear interpolation). Pixels outside the
 mesh keep the source image.
 
+Beyond the paper, on real clips (:meth:`CartoonAnimator.drive`, the default of ``animate2d``): the
+head's in-plane similarity is taken out of the capture first (:mod:`.headmotion`: the cartoon keeps
+its size and place, ``head="follow"`` moves the whole image with the head instead); the mesh's
+interior points follow the landmarks by a biharmonic interpolation; lips and eyelids that meet or
+cross close instead of passing through each other (:func:`close_contacts`); and
+:mod:`.foldfree` keeps every triangle of the warp from turning over, with an exact check of every
+frame before it is drawn.
+
 The rasteriser is a vectorised scanline: the (triangle, row) pairs of all bounding boxes are
 enumerated at once (``np.repeat`` of per-triangle row counts), each pair's exact pixel span follows
 from the triangle's three barycentric (edge) functions, and the spans are expanded to pixels whose
@@ -473,4 +481,5 @@ def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices,
     return CartoonAnimation(frames, drive.meshes, anim.faces, anim.scale, anim.rest)
 
 
-__all__ = ["static_band", "close_contacts", "CONTACTS_68", "CartoonDrive", "CartoonAnimator", "CartoonAnimation", "animate_cartoon", "rasterize_maps", "warp_image"]
+__all__ = ["static_band", "close_contacts", "CONTACTS_68", "INTERIOR_MODES", "CartoonDrive", "CartoonAnimator",
+           "CartoonAnimation", "animate_cartoon", "rasterize_maps", "warp_image"]

@@ -283,6 +283,7 @@ class FoldFreeMap:
                     # resolved at the cost of their neighbours' fit, never the other way round
                     boost = np.ones(len(s2)) if boost is None else boost
                     boost[s2 < 0.5 * self.sigma_lo] *= 4.0
+                    np.minimum(boost, 1e4, out=boost)             # bounded: the system stays well conditioned
                     factor = self._factorise(boost)
         dets = np.linalg.det(J)
         alpha = 1.0

@@ -155,6 +155,29 @@ def source_features(cap, detector, check_every):
     return np.array(out)
 
 
+COLUMNS = ("clip", "image", "mode", "frames", "frames_fold_mesh", "max_fold_mesh", "frames_fold_all", "frames_iterated",
+           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "detected", "r_mouth_open",
+           "r_mouth_width", "r_brow_height", "r_eye_open", "r_median")
+
+
+def markdown(csv_path) -> str:
+    """The CSV written by :func:`main` as a markdown table (the columns present)."""
+    with open(csv_path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cols = [c for c in COLUMNS if rows and c in rows[0]]
+
+    def cell(v):
+        try:
+            f = float(v)
+        except ValueError:
+            return v
+        return f"{f:.0f}" if f == int(f) else f"{f:.3g}"
+
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(cell(r.get(c, "")) for c in cols) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("captures", nargs="+")
@@ -217,7 +240,8 @@ def main(argv=None):
         w = csv.DictWriter(fh, keys)
         w.writeheader()
         w.writerows(rows)
-    print(f"wrote {out / 'bench_cartoon.csv'}")
+    (out / "bench_cartoon.md").write_text(markdown(out / "bench_cartoon.csv"))
+    print(f"wrote {out / 'bench_cartoon.csv'} and bench_cartoon.md")
 
 
 if __name__ == "__main__":

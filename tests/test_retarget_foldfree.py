@@ -194,18 +194,3 @@ def test_bad_interior_and_solver_values(toon):
         with pytest.raises(InputError, match=msg):
             FoldFreeMap(rest, mesh.faces, **kw)
 
-
-def test_folded_placement_is_unfolded_before_driving(toon):
-    """Image landmarks in another order than the capture's (nose wings swapped): the RBF placement
-    turns triangles over; the animator re-fits it so that none is, and driving stays fold-free."""
-    face, cap0, mesh = toon
-    lm = face.landmarks.copy()
-    lm[[31, 35]] = lm[[35, 31]]
-    lm[[32, 34]] = lm[[34, 32]]
-    anim = CartoonAnimator(face.image, lm, cap0, mesh.vertices, mesh.faces)
-    assert anim.placement_flips > 0
-    ref = FoldFreeMap(mesh.vertices, mesh.faces)
-    assert ref.area_ratios(anim.rest).min() > 0
-    drive = anim.drive(_lip_push(mesh), _lip_push(mesh)[:, :68])
-    assert _flipped(anim, drive).max() == 0
-    assert np.array_equal(anim.frame_at(drive, 0), face.image)

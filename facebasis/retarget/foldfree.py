@@ -205,13 +205,12 @@ class FoldFreeMap:
     def _global(self, P, target, factor) -> np.ndarray:
         """Global step of (1): the minimiser for fixed projections P (mv, 2, 2)."""
         GtW, A_fx, lu, weight = factor
-        X = target.copy()
-        X[self.fixed] = self.rest[self.fixed]
+        X = target.copy()                                   # fixed vertices stay where the target has them
         if lu is None:
             return X
         for c in range(2):
             rhs = GtW @ P[:, c, :].reshape(-1) + weight * self._mu * target[:, c]
-            rhs = rhs[self.free] - A_fx @ self.rest[self.fixed, c]
+            rhs = rhs[self.free] - A_fx @ target[self.fixed, c]
             X[self.free, c] = lu.solve(rhs)
         return X
 

@@ -339,9 +339,6 @@ class CartoonAnimator:
         self.rbf = fit_rbf(lm_cap, lm_img, c)                                  # eq. 10-11
         self.rest = self.rbf(self.capture_rest)
         self.scale = edge_length_ratio(self.rest, self.faces, self.capture_rest, self.faces)   # eq. 13
-        self.placement_flips = 0
-        if fold_free:
-            self.rest = self._unfold_placement(self.rest)
         if border > 0:
             ring, band = static_band(self.rest, self.faces, self.image.shape[1], self.image.shape[0], border)
         else:
@@ -369,25 +366,6 @@ class CartoonAnimator:
 
             n = len(self.rest)
             self.solver = FoldFreeMap(self.warp_rest, self.warp_faces, np.arange(n, n + len(ring)))
-
-    def _unfold_placement(self, placed) -> np.ndarray:
-        """The RBF placement (eq. 10) with no triangle turned over against the capture's first frame.
-
-        On a face of another shape or pose (a photograph, a painting) the interpolating RBF can turn
-        a few triangles of the capture mesh over (20 of 261 on scikit-image's astronaut against a
-        webcam clip): the rest cartoon is then folded, and the capture's motion, mirrored there,
-        folds it further on most frames. The placement is re-fitted by :class:`.foldfree.FoldFreeMap`
-        against the capture mesh scaled by eq. 13 (only when it has such triangles; frame 0 still
-        shows the image exactly, since frame 0's mesh is this rest)."""
-        from .foldfree import FoldFreeMap
-
-        ref = self.capture_rest * self.scale
-        fm = FoldFreeMap(ref, self.faces)
-        self.placement_flips = int(np.count_nonzero(fm.area_ratios(placed) <= 0))
-        if self.placement_flips == 0:
-            return placed
-        X, _ = fm.solve(placed - placed.mean(0) + ref.mean(0))
-        return X - ref.mean(0) + placed.mean(0)
 
     def mesh(self, capture_vertices) -> np.ndarray:
         """Cartoon mesh (..., N, 2) for captured vertices (..., N, 2): ``rest + s (v_t - v_0)`` (eq. 12)."""

@@ -129,7 +129,7 @@ class FoldFreeMap:
     """
 
     def __init__(self, rest, faces, fixed=None, sigma_lo: float = SIGMA_LO, weight: float = DATA_WEIGHT,
-                 iterations: int = 40, margin: float = MARGIN, reweight_every: int = 5):
+                 iterations: int = 100, margin: float = MARGIN, reweight_every: int = 5):
         import scipy.sparse as sp
 
         if not (np.isfinite(sigma_lo) and 0 < sigma_lo < 1):

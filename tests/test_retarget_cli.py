@@ -148,6 +148,46 @@ def test_animate3d(capture, tmp_path, capsys):
     assert g.accessors[g.animations[0].samplers[0].input].count == 24
 
 
+def test_head_option(capture, tmp_path, capsys):
+    """--head still (default) takes the head's similarity out; --head follow / --follow-head keep it."""
+    folder, _ = capture
+    meshes = {}
+    for name, extra in (("still", []), ("follow", ["--head", "follow"]), ("short", ["--follow-head"])):
+        out = tmp_path / f"a2_{name}"
+        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        with np.load(out / "cartoon_mesh.npz") as d:
+            meshes[name] = d["vertices"]
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["head"] == ("still" if name == "still" else "follow")
+    np.testing.assert_array_equal(meshes["follow"], meshes["short"])
+    assert np.abs(meshes["follow"] - meshes["still"]).max() > 1.0           # the synthetic head moves
+    # still: the stable points (nose, eye corners) move less (only by the synthetic head's turns out
+    # of the image plane, which no similarity describes); follow: they also move with the head
+    stable = np.r_[27:36, 36, 39, 42, 45]
+    spread = lambda M: np.sqrt(np.mean((M[:, stable] - M[:1, stable]) ** 2))  # noqa: E731
+    assert spread(meshes["still"]) < spread(meshes["follow"])
+    rig = default_template()
+    for name, extra in (("still", []), ("follow", ["--follow-head"])):
+        out = tmp_path / f"a3_{name}"
+        code, _, err = run(["animate3d", str(folder), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        with np.load(out / "frames.npz") as d:
+            meshes["3d" + name] = d["vertices"]
+    assert np.abs(meshes["3dfollow"] - meshes["3dstill"]).max() > 0.01 * np.ptp(rig.neutral[:, 0])
+    z = meshes["3dstill"][:, :, 2]
+    np.testing.assert_allclose(z, np.broadcast_to(rig.neutral[:, 2], z.shape), atol=1e-5)
+
+
+@pytest.mark.parametrize("value", ["sideways", "Still!", ""])
+def test_bad_head_values(capture, tmp_path, capsys, value):
+    folder, _ = capture
+    out = tmp_path / "out"
+    for cmd in ("animate2d", "animate3d"):
+        _fails([cmd, str(folder), "--head", value, "--out", str(out)],
+               f"--head: expected one of still, follow, found {value!r}", capsys, out)
+
+
 # ---------------------------------------------------------------------------------------------
 # every error: one line, before any work, no output folder
 

@@ -60,12 +60,19 @@ def test_animate_cartoon_moves_mesh_by_scaled_displacements():
     lm_img = face.landmarks
     lm_cap = 2.0 * lm_img + 30.0                  # the capture is twice as large: eq. 13 scale 0.5
     V = np.stack([lm_cap, lm_cap + [4.0, 0.0]])
+    # a shift of the whole face is head motion: still by default, the whole cartoon follows on request
     res = animate_cartoon(face.image, lm_img, V, V, Delaunay(lm_cap).simplices)
     assert res.scale == pytest.approx(0.5)
     np.testing.assert_allclose(res.rest, lm_img, atol=1e-6)
+    np.testing.assert_allclose(res.meshes, np.stack([lm_img, lm_img]), atol=1e-9)
+    assert np.array_equal(res.frames[1], face.image)
+    res = animate_cartoon(face.image, lm_img, V, V, Delaunay(lm_cap).simplices, head="follow")
     np.testing.assert_allclose(res.meshes[1] - res.meshes[0], np.tile([2.0, 0.0], (68, 1)), atol=1e-9)
     assert np.array_equal(res.frames[0], face.image)
-    assert not np.array_equal(res.frames[1], face.image)
+    np.testing.assert_array_equal(res.frames[1][:, 2:], face.image[:, :-2])   # the whole image moved 2 px
+    # the paper's eq. 12 alone moves the mesh inside the still image
+    anim = CartoonAnimator(face.image, lm_img, lm_cap, lm_cap, Delaunay(lm_cap).simplices)
+    np.testing.assert_allclose(anim.mesh(V[1]) - lm_img, np.tile([2.0, 0.0], (68, 1)), atol=1e-9)
 
 
 def test_default_cartoon():

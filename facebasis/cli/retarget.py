@@ -18,7 +18,7 @@ def _capture_video(args):
 def cmd_animate2d(args) -> int:
     from ..retarget.pipeline import run_animate2d
 
-    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, log=print)
+    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=print)
     beside = f", beside {s['video_beside']}" if s["video_beside"] else ""
     print(f"animated {s['frames']} frames ({s['warp_ms_per_frame']:.1f} ms per frame warp{beside}) -> {args.out}")
     return 0
@@ -27,7 +27,7 @@ def cmd_animate2d(args) -> int:
 def cmd_animate3d(args) -> int:
     from ..retarget.pipeline import run_animate3d
 
-    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, log=print, unit=args.unit)
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, head=args.head, log=print, unit=args.unit)
     print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
     return 0
 
@@ -55,6 +55,16 @@ def cmd_retarget(args) -> int:
     return 0
 
 
+def _head_options(p, what: str) -> None:
+    """``--head still|follow`` and its shorthand ``--follow-head`` (animate2d, animate3d)."""
+    p.add_argument("--head", default="still", metavar="still|follow",
+                   help=f"still (default): the {what} keeps its size and place and shows the expression only (the "
+                        f"head's scale, in-plane rotation and shift are taken out of the capture); follow: the "
+                        f"whole {what} also moves, turns and scales with the head")
+    p.add_argument("--follow-head", dest="head", action="store_const", const="follow",
+                   help="the same as --head follow")
+
+
 def register(subparsers) -> None:
     """Add ``animate2d``, ``animate3d`` and ``retarget`` to an argparse sub-parser collection."""
     p = subparsers.add_parser(
@@ -68,6 +78,7 @@ def register(subparsers) -> None:
                    help="cartoon image (default: the built-in cartoon face)")
     p.add_argument("--landmarks", default=None, metavar="CARTOON.pts",
                    help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
+    _head_options(p, "cartoon")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),
                                                       derived=_capture_video))
@@ -84,6 +95,7 @@ def register(subparsers) -> None:
                    help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",
                    help="the mesh's length unit; animation.glb is written in metres (default cm: the built-in face)")
+    _head_options(p, "mesh")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate3d, outputs=Outputs(writes=_OUT, reads=("capture", "mesh", "landmarks"),
                                                       derived=_capture_video))

@@ -14,6 +14,8 @@ Modules
 -------
 rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
 warp2d     vectorised piecewise-affine warp of a cartoon image (:class:`CartoonAnimator`)
+foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
+headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits

@@ -8,6 +8,12 @@ eq. 13 (the ratio of mean edge lengths of the capture mesh placed on the target 
 multiquadric RBF of eq. 10-11, in the target's image plane, to the capture mesh), applied in the
 mesh's image-plane axes: image x -> mesh +x, image y (down) -> mesh -y.
 
+Head motion: the capture's in-plane head similarity (scale, rotation, shift; Procrustes on stable
+landmarks, :mod:`.headmotion`) is taken out of the landmarks first, so by default (``head="still"``)
+the mesh keeps its size and place and shows the expression only; ``head="follow"`` then applies that
+similarity to the whole mesh (rotation about the view axis z, uniform scale about the landmark
+centroid, the shift scaled by eq. 13).
+
 How z is handled: a single video gives no depth, so the driven points get no z displacement and the
 smooth deformation, solved per coordinate, leaves z unchanged everywhere: the motion is in the
 mesh's x-y plane (a frontal view of the face).
@@ -92,7 +98,10 @@ class MeshDriver:
     """
 
     def __init__(self, vertices, faces, indices, capture_landmarks, capture_vertices=None, capture_faces=None,
-                 eps: float = 1e-9):
+                 eps: float = 1e-9, head: str = "still"):
+        from .headmotion import parse_head_mode
+
+        self.head_mode = parse_head_mode(head)
         self.V = np.asarray(vertices, np.float64)
         self.F = np.asarray(faces, np.int64)
         self.indices = np.asarray(indices, np.int64)
@@ -116,16 +125,45 @@ class MeshDriver:
         self.W = biharmonic_basis(self.V, self.F, self.indices, eps)        # factor once
         self.setup_seconds = time.perf_counter() - t0
 
+    def head_motion(self, landmarks):
+        """:class:`.headmotion.HeadMotion` of landmarks (T, L, 2) against the first frame's."""
+        from .headmotion import fit_head_motion
+
+        return fit_head_motion(np.asarray(landmarks, np.float64), self.lm0)
+
     def handle_displacements(self, landmarks) -> np.ndarray:
-        """Driven displacements (..., L, 2) in mesh x, y for captured landmarks (..., L, 2) (eq. 12)."""
-        d = self.scale * (np.asarray(landmarks, np.float64) - self.lm0)
+        """Driven displacements (..., L, 2) in mesh x, y for captured landmarks (..., L, 2) (eq. 12),
+        the head's similarity taken out first."""
+        lm = np.asarray(landmarks, np.float64)
+        single = lm.ndim == 2
+        lm3 = lm[None] if single else lm.reshape((-1,) + lm.shape[-2:])
+        expr = self.head_motion(lm3).remove(lm3).reshape(lm.shape)
+        d = self.scale * (expr - self.lm0)
         return d * np.array([1.0, -1.0])
+
+    def _follow(self, frames, motion) -> np.ndarray:
+        """Apply the head's similarity per frame to whole meshes (T, n, 3), in place and returned."""
+        from .headmotion import stable_landmarks
+
+        idx = stable_landmarks(len(self.lm0))
+        c0 = self.lm0[idx].mean(0)
+        moved = motion.a * complex(*c0) + motion.b - complex(*c0)            # capture centre shift (px)
+        a = np.conj(motion.a)                                               # y up: the turn reverses
+        shift = self.scale * np.conj(moved)                                 # (T,) mesh units, y up
+        cm = self.V[self.indices[idx]].mean(0)
+        z = (frames[..., 0] - cm[0]) + 1j * (frames[..., 1] - cm[1])
+        z = cm[0] + 1j * cm[1] + a[:, None] * z + shift[:, None]
+        frames[..., 0], frames[..., 1] = z.real, z.imag
+        frames[..., 2] = cm[2] + np.abs(motion.a)[:, None] * (frames[..., 2] - cm[2])
+        return frames
 
     def frame(self, landmarks) -> np.ndarray:
         """Deformed vertices (n, 3) for one frame's landmarks (L, 2)."""
         d = self.W @ self.handle_displacements(landmarks)
         out = self.V.copy()
         out[:, :2] += d
+        if self.head_mode == "follow":
+            out = self._follow(out[None], self.head_motion(np.asarray(landmarks, np.float64)[None]))[0]
         return out
 
     def run(self, landmarks, fps: float = 30.0) -> MeshAnimation:
@@ -137,6 +175,8 @@ class MeshDriver:
         D = self.handle_displacements(lm)                                    # (T, L, 2)
         out = np.repeat(self.V[None], len(lm), axis=0)
         out[:, :, :2] += np.einsum("nl,tlc->tnc", self.W, D)
+        if self.head_mode == "follow":
+            out = self._follow(out, self.head_motion(lm))
         return MeshAnimation(out, self.F, self.indices, self.scale, float(fps), time.perf_counter() - t0)
 
     def morph_basis(self, landmarks, tol: float = 1e-3):
@@ -155,6 +195,8 @@ class MeshDriver:
         """
         D = self.handle_displacements(np.asarray(landmarks, np.float64))
         T, L = D.shape[:2]
+        if self.head_mode == "follow":          # not linear in D any more: components of the whole motion
+            return self._morph_basis_follow(landmarks, tol)
         H = D.reshape(T, -1)
         U, S, Vt = np.linalg.svd(H, full_matrices=False)
         limit = tol * float(np.linalg.norm(np.ptp(self.V, axis=0)))
@@ -175,6 +217,63 @@ class MeshDriver:
         names = [f"motion{k:02d}{sign}" for k in range(r) for sign in ("+", "-")]
         return targets, names, weights
 
+    def _morph_basis_follow(self, landmarks, tol):
+        """:meth:`morph_basis` with the head's similarity (head "follow").
+
+        A frame is ``V + (A_t - I)(V - c) + W (D_t A_t^T) + tau_t`` in x, y (z scaled by rho_t about
+        c): linear in the per-frame coefficients h_t = (D_t A_t^T, A_t - I, rho_t - 1, tau_t) over a
+        fixed lifted basis Phi (3n, 2L + 7). With Phi = QR, the SVD of ``h R^T`` (T, 2L + 7) gives the
+        components (rows of ``V^T Q^T``) without forming the (T, 3n) frames; the fewest are kept for
+        which every frame's displacement error (its norm, a bound on any vertex's) is within tol.
+        """
+        from .headmotion import stable_landmarks
+
+        lm = np.asarray(landmarks, np.float64)
+        motion = self.head_motion(lm)
+        D = self.handle_displacements(lm)                                   # (T, L, 2)
+        T, L = D.shape[:2]
+        n = len(self.V)
+        a = np.conj(motion.a)
+        A = np.stack([np.stack([a.real, -a.imag], -1), np.stack([a.imag, a.real], -1)], 1)   # (T, 2, 2)
+        E = np.einsum("tlj,tij->tli", D, A)                                 # D_t A_t^T
+        idx = stable_landmarks(len(self.lm0))
+        c0 = self.lm0[idx].mean(0)
+        moved = motion.a * complex(*c0) + motion.b - complex(*c0)
+        shift = self.scale * np.conj(moved)
+        cm = self.V[self.indices[idx]].mean(0)
+        rel = self.V - cm
+        k = 2 * L + 7
+        Phi = np.zeros((n, 3, k))
+        Phi[:, 0, 0:2 * L:2] = self.W                                       # E[:, l, x]
+        Phi[:, 1, 1:2 * L:2] = self.W                                       # E[:, l, y]
+        for i in range(2):                                                  # (A - I)[i, j] (V - c)_j
+            for j in range(2):
+                Phi[:, i, 2 * L + 2 * i + j] = rel[:, j]
+        Phi[:, 2, 2 * L + 4] = rel[:, 2]                                    # (rho - 1)(z - c_z)
+        Phi[:, 0, 2 * L + 5] = 1.0
+        Phi[:, 1, 2 * L + 6] = 1.0
+        h = np.concatenate([E.reshape(T, -1), (A - np.eye(2)).reshape(T, 4), (np.abs(a) - 1.0)[:, None],
+                            shift.real[:, None], shift.imag[:, None]], 1)
+        Q, R = np.linalg.qr(Phi.reshape(3 * n, k))
+        U, S, Vt = np.linalg.svd(h @ R.T, full_matrices=False)
+        limit = tol * float(np.linalg.norm(np.ptp(self.V, axis=0)))
+        coef_all = U * S
+        # residual row norms for every r at once: the tail of the squared coefficients
+        tail = np.sqrt(np.maximum(np.cumsum((coef_all ** 2)[:, ::-1], axis=1)[:, ::-1], 0.0))   # (T, k')
+        ok = np.flatnonzero(np.r_[tail.max(0), 0.0] <= limit)
+        r = int(ok[0]) if len(ok) else len(S)
+        coef = coef_all[:, :r]
+        m = np.abs(coef).max(axis=0) if r else np.zeros(0)
+        B = (Vt[:r] @ Q.T).reshape(r, n, 3)
+        targets = np.zeros((2 * r, n, 3))
+        targets[0::2] = B * m[:, None, None]
+        targets[1::2] = -B * m[:, None, None]
+        weights = np.zeros((T, 2 * r))
+        weights[:, 0::2] = np.maximum(coef, 0) / np.where(m > 0, m, 1)
+        weights[:, 1::2] = np.maximum(-coef, 0) / np.where(m > 0, m, 1)
+        names = [f"motion{k:02d}{sign}" for k in range(r) for sign in ("+", "-")]
+        return targets, names, weights
+
     def morph_error(self, landmarks, targets, weights) -> float:
         """Largest vertex distance between :meth:`run`'s frames and the morph-target animation."""
         full = self.run(landmarks).vertices
@@ -183,11 +282,11 @@ class MeshDriver:
 
 
 def drive_mesh(vertices, faces, indices, landmarks, capture_vertices=None, capture_faces=None,
-               fps: float = 30.0) -> MeshAnimation:
+               fps: float = 30.0, head: str = "still") -> MeshAnimation:
     """One-off: drive a mesh by landmarks (T, L, 2) (frame 0 is the rest pose)."""
     lm = np.asarray(landmarks, np.float64)
     cv = None if capture_vertices is None else np.asarray(capture_vertices, np.float64)[0]
-    return MeshDriver(vertices, faces, indices, lm[0], cv, capture_faces).run(lm, fps)
+    return MeshDriver(vertices, faces, indices, lm[0], cv, capture_faces, head=head).run(lm, fps)
 
 
 __all__ = ["MeshDriver", "MeshAnimation", "drive_mesh", "biharmonic_basis"]

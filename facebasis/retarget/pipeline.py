@@ -27,17 +27,22 @@ def _log(log, text):
 # ----------------------------------------------------------------------------------------------
 # 2D
 
-def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds: float = 4.0, log=None) -> dict:
+def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds: float = 4.0, head: str = "still",
+                  log=None) -> dict:
     """Animate a cartoon image (default: the built-in cartoon) by a capture folder.
 
     Writes ``cartoon.mp4`` (the source video's frames beside the cartoon when the capture records
     its video), ``cartoon.gif`` (the first ``gif_seconds``), ``cartoon_mesh.npz`` (vertices (T, N, 2),
-    faces), ``cartoon_rest.png`` and ``summary.json``.
+    faces), ``cartoon_rest.png`` and ``summary.json``. ``head``: "still" (the cartoon shows the
+    expression only) or "follow" (it also moves with the head), see :meth:`.CartoonAnimator.drive`.
+    No frame is written with a triangle of the warp mesh flipped against the rest cartoon.
     """
     from .files import read_image, read_points2d
+    from .headmotion import parse_head_mode
     from .media import check_video, read_video_frames, side_by_side, write_gif, write_mp4
     from .warp2d import CartoonAnimator
 
+    head = parse_head_mode(head)
     cap = read_capture(capture_dir)
     if (image is None) != (landmarks is None):
         raise InputError("--image and --landmarks: expected both (a cartoon and its landmarks) or neither "
@@ -57,10 +62,15 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
                              f"count), found {len(pts)}")
         img, what = read_image(image), str(image)
     t0 = time.perf_counter()
-    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces)
-    meshes = anim.mesh(cap.vertices)
+    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head)
+    drive = anim.drive(cap.vertices, cap.landmarks)
+    meshes = drive.meshes
+    n_fold = int(np.count_nonzero(drive.folded_target))
+    n_fallback = int(np.count_nonzero(drive.alpha < 1))
     _log(log, f"cartoon: {what}, {img.shape[1]}x{img.shape[0]}; capture {cap.n_frames} frames, "
-              f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}")
+              f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}; head {head}; "
+              f"{n_fold} frames would fold, the warp gave way in {int(np.count_nonzero(drive.iterations))} "
+              f"(blended towards the rest in {n_fallback})")
     overlay = Path(capture_dir) / OVERLAY_FILE  # the source video, or else the capture's overlay of it
     video = cap.video if cap.video is not None else (overlay if overlay.is_file() else None)
     if video is not None:
@@ -72,7 +82,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
         src = read_video_frames(video, what=f"capture {capture_dir}: its video") if video is not None else None
         for f in range(cap.n_frames):
             t1 = time.perf_counter()
-            out = anim.warp(meshes[f])
+            out = anim.frame_at(drive, f)
             warp_seconds += time.perf_counter() - t1
             if len(gif_frames) <= gif_seconds * cap.fps:
                 gif_frames.append(out)
@@ -93,7 +103,9 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
         if not ok:  # pragma: no cover - OpenCV cannot encode an (H, W, 3) uint8 image
             raise InputError(f"cartoon image: OpenCV could not encode it as PNG ({img.shape}, {img.dtype})")
         atomic_write_bytes(stage / "cartoon_rest.png", png.tobytes())
-        summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c,
+        summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c, "head": head,
+                   "frames_target_folded": n_fold, "frames_gave_way": int(np.count_nonzero(drive.iterations)),
+                   "frames_blended_to_rest": n_fallback, "plan_ms_per_frame": 1e3 * drive.seconds / max(n, 1),
                    "video_beside": str(video) if video is not None else None,
                    "warp_ms_per_frame": 1e3 * warp_seconds / max(n, 1), "seconds": time.perf_counter() - t0}
         atomic_write_json(stage / "summary.json", summary)
@@ -111,19 +123,23 @@ def _default_face_mesh():
     return rig.neutral, rig.faces, face_landmarks()
 
 
-def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, unit: str = "cm") -> dict:
+def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "still", log=None,
+                  unit: str = "cm") -> dict:
     """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
     (T, n, 3), faces), ``animation.glb`` (morph targets over a PCA basis of the motion,
     :func:`.animation.compact_vertex_animation`, in metres from the mesh's ``unit``, with an OBJ
-    mesh's UVs and materials) and ``summary.json``."""
+    mesh's UVs and materials) and ``summary.json``. ``head``: "still" (expression only) or
+    "follow" (the whole mesh moves with the head)."""
     from ..geometry.gltf import unit_scale
     from ..geometry.meshio import read_mesh
     from ..geometry.objlayout import read_obj_layout
     from .animation import frame_times, vertex_animation_glb_bytes
     from .drive3d import MeshDriver
     from .files import read_indices
+    from .headmotion import parse_head_mode
     from .rigdrive import check_landmark_indices
 
+    head = parse_head_mode(head)
     unit_scale(unit)                                  # a bad --unit: said before any work
     cap = read_capture(capture_dir)
     layout = None
@@ -143,7 +159,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, uni
     idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
                                  f"landmark index file {landmarks}" if landmarks else "landmark indices")
     t0 = time.perf_counter()
-    driver = MeshDriver(V, F, idx, cap.landmarks[0], cap.vertices[0], cap.faces)
+    driver = MeshDriver(V, F, idx, cap.landmarks[0], cap.vertices[0], cap.faces, head=head)
     anim = driver.run(cap.landmarks, cap.fps)
     glb, motion = vertex_animation_glb_bytes(V, F, anim.vertices, frame_times(cap.n_frames, cap.fps), unit=unit,
                                              layout=layout)
@@ -156,7 +172,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, uni
         np.savez(stage / "frames.npz", vertices=anim.vertices.astype(np.float32), faces=anim.faces,
                  indices=idx, fps=np.float64(cap.fps))
         atomic_write_bytes(stage / "animation.glb", glb)
-        summary = {"frames": cap.n_frames, "fps": cap.fps, "vertices": len(V), "scale_eq13": driver.scale,
+        summary = {"frames": cap.n_frames, "fps": cap.fps, "vertices": len(V), "scale_eq13": driver.scale, "head": head,
                    "morph_targets": len(names), "animation_max_vertex_error": glb_error,
                    "animation_error_bound": motion.tolerance, "animation_basis": motion.rank,
                    "seconds": time.perf_counter() - t0,

@@ -1,0 +1,248 @@
+"""Benchmark of the cartoon warp on real captures: folds, head motion, speed, expressions kept.
+
+    python -m problems.bench_cartoon CAPTURE_DIR [CAPTURE_DIR ...] [--out reports/reproduction]
+        [--check-every 5] [--no-check] [--png FRAME ...] [--images a,b] [--modes paper,still,follow]
+        [--warp-every K]
+
+For every capture folder (``facebasis capture`` output) and every target image (the built-in
+cartoon, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
+(``cv2.stylization``) version of it, with dlib's landmarks), three ways of driving the cartoon:
+
+* ``paper``: eq. 12 as it is (the head's motion included, no fold handling), the earlier default;
+* ``still``: the new default, head similarity removed, contacts closed, fold-free warp;
+* ``follow``: as ``still`` with the whole image moved with the head (``--head follow``).
+
+Reported per (clip, image, mode): frames with at least one folded triangle (orientation flipped
+against the rest cartoon) among the capture mesh's triangles (those of ``cartoon_mesh.npz``) and
+among all triangles of the warp (band included), the largest count in a frame, frames where the
+iteration ran / where the blend fallback was needed, the cartoon's face width (distance of jaw
+landmarks 0 and 16) over the clip, ms per frame (planning + warp, single thread), and the
+expression check: dlib run on the output frames and on the source frames (every ``--check-every``
+frame), the Pearson correlation over time of mouth opening, mouth width, brow height and eye
+opening (each divided by the eye-corner distance of the same detection).
+
+Frames of the real clips are written only to git-ignored files (``--png``:
+``OUT/cartoon_frames_*.png``, source | paper | still side by side).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from facebasis.capture.trackfile import read_capture
+from facebasis.defaults.cartoon import default_cartoon
+from facebasis.retarget.warp2d import CartoonAnimator
+
+MODES = ("paper", "still", "follow")
+
+
+def target_images(detector):
+    """[(name, image (H, W, 3) uint8 RGB, landmarks (68, 2))]: several faces, drawn and photographed."""
+    import cv2
+
+    face = default_cartoon()
+    out = [("cartoon", face.image, face.landmarks)]
+    wide = cv2.resize(face.image, (int(round(1.3 * 512)), 512), interpolation=cv2.INTER_AREA)
+    out.append(("cartoon-wide", wide, face.landmarks * [wide.shape[1] / 512.0, 1.0]))
+    try:
+        from skimage import data
+
+        astro = np.ascontiguousarray(data.astronaut())
+    except ImportError:
+        return out
+    lm = detector.detect(astro)
+    if lm is not None:
+        out.append(("astronaut", astro, lm))
+        painted = cv2.stylization(astro[..., ::-1].copy(), sigma_s=60, sigma_r=0.45)[..., ::-1].copy()
+        lm_p = detector.detect(painted)
+        out.append(("astronaut-painted", painted, lm if lm_p is None else lm_p))
+    return out
+
+
+def features(lm):
+    """(k,) expression measures of 68 landmarks, in eye-corner distances: mouth opening, mouth
+    width, brow height, eye opening."""
+    iod = np.linalg.norm(lm[45] - lm[36])
+    mouth_open = np.linalg.norm(lm[[61, 62, 63]] - lm[[67, 66, 65]], axis=1).mean()
+    mouth_w = np.linalg.norm(lm[54] - lm[48])
+    brow = (np.linalg.norm(lm[17:22].mean(0) - lm[36:42].mean(0))
+            + np.linalg.norm(lm[22:27].mean(0) - lm[42:48].mean(0))) / 2
+    eye = (np.linalg.norm(lm[[37, 38]] - lm[[41, 40]], axis=1).mean()
+           + np.linalg.norm(lm[[43, 44]] - lm[[47, 46]], axis=1).mean()) / 2
+    return np.array([mouth_open, mouth_w, brow, eye]) / iod
+
+
+FEATURES = ("mouth_open", "mouth_width", "brow_height", "eye_open")
+
+
+def folds_per_frame(rest, meshes, faces):
+    """(T,) triangles of ``faces`` whose signed area has the other sign than (or collapsed from) the rest."""
+    def area(V):
+        a, b, c = V[..., faces[:, 0], :], V[..., faces[:, 1], :], V[..., faces[:, 2], :]
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+
+    a0 = area(rest)
+    ok = np.abs(a0) > 1e-9 * float(np.ptp(rest, axis=0).max()) ** 2
+    a = area(meshes)
+    return np.count_nonzero((a * np.sign(a0) <= 0) & ok, axis=-1)
+
+
+def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_frames, warp_every=1):
+    anim = CartoonAnimator(img, lm_img, cap.landmarks[0], cap.vertices[0], cap.faces,
+                           head="follow" if mode == "follow" else "still", fold_free=mode != "paper")
+    t0 = time.perf_counter()
+    if mode == "paper":
+        meshes = anim.mesh(cap.vertices)
+        drive = None
+    else:
+        drive = anim.drive(cap.vertices, cap.landmarks)
+        meshes = drive.meshes
+    plan = time.perf_counter() - t0
+    T = cap.n_frames
+    ring = np.broadcast_to(anim.ring, (T,) + anim.ring.shape)
+    folds_mesh = folds_per_frame(anim.rest, meshes, anim.faces)
+    still = meshes if drive is None else drive.still
+    folds_all = folds_per_frame(anim.warp_rest, np.concatenate([still, ring], 1), anim.warp_faces)
+    width = np.linalg.norm(meshes[:, 16] - meshes[:, 0], axis=1)
+    warp, n_warp = 0.0, 0
+    frames = {}
+    out_feats = []
+    for t in range(T):
+        checked = detector is not None and t % check_every == 0
+        if t % warp_every and t not in png_frames and not checked:
+            continue
+        n_warp += 1
+        t1 = time.perf_counter()
+        fr = anim.warp(meshes[t]) if drive is None else anim.frame_at(drive, t)
+        warp += time.perf_counter() - t1
+        if t in png_frames:
+            frames[t] = fr
+        if checked:
+            d = detector.detect(fr)
+            out_feats.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
+    row = {"image": name, "mode": mode, "frames": T,
+           "frames_fold_mesh": int(np.count_nonzero(folds_mesh)), "max_fold_mesh": int(folds_mesh.max()),
+           "frames_fold_all": int(np.count_nonzero(folds_all)), "max_fold_all": int(folds_all.max()),
+           "frames_iterated": int(np.count_nonzero(drive.iterations)) if drive else 0,
+           "frames_fallback": int(np.count_nonzero(drive.alpha < 1)) if drive else 0,
+           "width_min": float(width.min()), "width_max": float(width.max()),
+           "ms_plan": 1e3 * plan / T, "ms_warp": 1e3 * warp / max(n_warp, 1)}
+    if detector is not None and src_feats is not None:
+        of = np.array(out_feats)
+        row["detected"] = int(np.count_nonzero(np.isfinite(of[:, 0])))
+        for k, fname in enumerate(FEATURES):
+            ok = np.isfinite(of[:, k]) & np.isfinite(src_feats[:, k])
+            row[f"r_{fname}"] = float(np.corrcoef(of[ok, k], src_feats[ok, k])[0, 1]) if ok.sum() > 3 else float("nan")
+        row["r_median"] = float(np.nanmedian([row[f"r_{f}"] for f in FEATURES]))
+    return row, frames
+
+
+def source_features(cap, detector, check_every):
+    from facebasis.retarget.media import read_video_frames
+
+    out = []
+    for t, fr in enumerate(read_video_frames(cap.video)):
+        if t >= cap.n_frames:
+            break
+        if t % check_every == 0:
+            d = detector.detect(fr)
+            out.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
+    return np.array(out)
+
+
+COLUMNS = ("clip", "image", "mode", "frames", "frames_fold_mesh", "max_fold_mesh", "frames_fold_all", "frames_iterated",
+           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "detected", "r_mouth_open",
+           "r_mouth_width", "r_brow_height", "r_eye_open", "r_median")
+
+
+def markdown(csv_path) -> str:
+    """The CSV written by :func:`main` as a markdown table (the columns present)."""
+    with open(csv_path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cols = [c for c in COLUMNS if rows and c in rows[0]]
+
+    def cell(v):
+        try:
+            f = float(v)
+        except ValueError:
+            return v
+        return f"{f:.0f}" if f == int(f) else f"{f:.3g}"
+
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(cell(r.get(c, "")) for c in cols) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("captures", nargs="+")
+    ap.add_argument("--out", default="reports/reproduction")
+    ap.add_argument("--check-every", type=int, default=5)
+    ap.add_argument("--no-check", action="store_true", help="skip the dlib expression check")
+    ap.add_argument("--png", type=int, nargs="*", default=[], help="frames to save side by side (git-ignored)")
+    ap.add_argument("--images", default=None, help="comma-separated subset of the target images")
+    ap.add_argument("--modes", default=",".join(MODES))
+    ap.add_argument("--warp-every", type=int, default=1, help="time the warp on every k-th frame only")
+    args = ap.parse_args(argv)
+    from facebasis.capture.detect import DlibDetector
+
+    det = DlibDetector()
+    images = target_images(det)
+    if args.images:
+        keep = args.images.split(",")
+        images = [im for im in images if im[0] in keep]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for cdir in args.captures:
+        cap = read_capture(cdir)
+        clip = Path(cdir).name
+        src = None if args.no_check or cap.video is None else source_features(cap, det, args.check_every)
+        src_frames = {}
+        if args.png and cap.video is not None:
+            from facebasis.retarget.media import read_video_frames
+
+            for t, fr in enumerate(read_video_frames(cap.video)):
+                if t in args.png:
+                    src_frames[t] = fr
+                if t > max(args.png):
+                    break
+        for name, img, lm in images:
+            shown = {}
+            for mode in args.modes.split(","):
+                row, frames = run_one(cap, name, img, lm, mode, None if args.no_check else det, args.check_every,
+                                      src, set(args.png), args.warp_every)
+                row = {"clip": clip, **row}
+                rows.append(row)
+                shown[mode] = frames
+                print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
+                      flush=True)
+            if args.png:
+                import cv2
+
+                for t in args.png:
+                    if t >= cap.n_frames:
+                        continue
+                    parts = [shown[m][t] for m in shown]
+                    h = parts[0].shape[0]
+                    if t in src_frames:
+                        s = src_frames[t]
+                        parts.insert(0, cv2.resize(s, (int(s.shape[1] * h / s.shape[0]), h)))
+                    strip = np.concatenate([p[:h] for p in parts], axis=1)
+                    cv2.imwrite(str(out / f"cartoon_frames_{clip}_{name}_{t}.png"), strip[..., ::-1])
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    with open(out / "bench_cartoon.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, keys)
+        w.writeheader()
+        w.writerows(rows)
+    (out / "bench_cartoon.md").write_text(markdown(out / "bench_cartoon.csv"))
+    print(f"wrote {out / 'bench_cartoon.csv'} and bench_cartoon.md")
+
+
+if __name__ == "__main__":
+    main()

@@ -39,3 +39,16 @@ def test_rbf_errors():
         fit_rbf(np.eye(2), np.eye(2))
     with pytest.raises(InputError, match="finite"):
         fit_rbf(np.full((5, 2), np.nan), np.zeros((5, 2)))
+
+
+def test_coincident_sources_are_trained_once_on_the_mean_of_their_targets():
+    """Closed lips put two landmarks on one pixel: the network maps that pixel to the mean of their
+    targets instead of failing or blowing up."""
+    from facebasis.retarget.rbf import fit_rbf
+
+    S = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0], [5.0, 5.0], [5.0, 5.0]])
+    T = S.copy()
+    T[4], T[5] = [5.0, 4.0], [5.0, 6.0]
+    rbf = fit_rbf(S, T)
+    np.testing.assert_allclose(rbf(S[:4]), T[:4], atol=1e-9)
+    np.testing.assert_allclose(rbf(S[4:5]), [[5.0, 5.0]], atol=1e-9)

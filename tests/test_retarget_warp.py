@@ -94,3 +94,28 @@ def test_animator_errors():
         CartoonAnimator(face.image, lm[:60], lm, lm, Delaunay(lm).simplices)
     with pytest.raises(InputError, match="8-bit"):
         CartoonAnimator(face.image.astype(float), lm, lm, lm, Delaunay(lm).simplices)
+
+
+def test_a_mouth_cut_open_along_closed_lips_is_drawn_as_an_opening_not_as_the_rest_lips():
+    """A take that starts with the lips closed gives a capture mesh cut along the lips; as the mouth
+    opens no triangle covers the gap. The cartoon must show a dark opening there, not its own closed
+    lips seen through the gap."""
+    from facebasis.capture.facemesh import build_face_mesh
+    from facebasis.defaults.cartoon import default_cartoon
+    from facebasis.retarget.warp2d import MOUTH_INTERIOR_RGB, CartoonAnimator, mouth_is_cut
+
+    face = default_cartoon()
+    lm = np.array(face.landmarks, float)
+    closed = lm.copy()
+    closed[[65, 66, 67]] = closed[[63, 62, 61]]          # lower inner lip on the upper one
+    mesh = build_face_mesh(closed)
+    assert mouth_is_cut(mesh.faces, 68) and not mouth_is_cut(build_face_mesh(lm).faces, 68)
+    anim = CartoonAnimator(np.array(face.image), lm, closed, mesh.vertices, mesh.faces, fold_free=False)
+    assert anim.mouth_cut
+    opened = mesh.vertices.copy()
+    opened[[65, 66, 67]] += [0.0, 12.0]                  # the mouth opens by 12 px
+    frame = anim.frame(opened)
+    centre = np.round(anim.mesh(opened)[[62, 66]].mean(0)).astype(int)
+    assert np.abs(frame[centre[1], centre[0], :3].astype(int) - MOUTH_INTERIOR_RGB).max() <= 2
+    rest = anim.frame(mesh.vertices)                      # closed: nothing is filled
+    np.testing.assert_array_equal(rest, anim.warp(anim.mesh(mesh.vertices)))

@@ -69,6 +69,19 @@ class RBFMap:
         return np.asarray(self._interp(P), dtype=np.float64)
 
 
+def merge_duplicate_sources(S, T):
+    """Source points that coincide (closed lips put an upper and a lower inner-lip landmark on one
+    pixel) cannot be interpolated to different targets: each set of coincident sources (k, d) is
+    trained once, on the mean of its targets (k, e). Returns (S, T) unchanged when all are distinct."""
+    U, inverse, counts = np.unique(S, axis=0, return_inverse=True, return_counts=True)
+    if len(U) == len(S):
+        return S, T
+    inverse = inverse.ravel()
+    merged = np.zeros((len(U), T.shape[1]))
+    np.add.at(merged, inverse, T)
+    return U, merged / counts[:, None]
+
+
 def fit_rbf(source, target, c: float | None = None, smoothing: float = 0.0) -> RBFMap:
     """Train the multiquadric network of eq. 10-11 on known pairs ``source[j] -> target[j]``.
 
@@ -81,8 +94,8 @@ def fit_rbf(source, target, c: float | None = None, smoothing: float = 0.0) -> R
     Raises
     ------
     InputError
-        mismatched counts, too few pairs for the affine tail (k < d + 1), duplicate source points
-        or a degenerate (collinear) set.
+        mismatched counts, too few pairs for the affine tail (k < d + 1) or a degenerate
+        (collinear) set. Coincident source points are merged (:func:`merge_duplicate_sources`).
     """
     from scipy.interpolate import RBFInterpolator
 
@@ -90,6 +103,7 @@ def fit_rbf(source, target, c: float | None = None, smoothing: float = 0.0) -> R
     T = _points(target, "RBF training outputs")
     if len(S) != len(T):
         raise InputError(f"RBF training pairs: expected as many targets as sources ({len(S)}), found {len(T)}")
+    S, T = merge_duplicate_sources(S, T)
     d = S.shape[1]
     if len(S) < d + 1:
         raise InputError(f"RBF training pairs: expected at least {d + 1} pairs, found {len(S)}")

@@ -254,10 +254,10 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
     ridge = _parse_ridge(ridge)
-    if identity is not None and not isinstance(identity, str):
-        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
-    if isinstance(identity, str) and identity not in ("auto", "first-frame", "rig"):
-        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
+    from .rigdrive import IDENTITY_MODES
+
+    if identity is not None and (not isinstance(identity, str) or identity not in IDENTITY_MODES):
+        raise InputError(f"--identity: expected one of {', '.join(IDENTITY_MODES)}, found {identity!r}")
     try:
         identity = resolve_identity(identity, first_frame_neutral)
     except InputError as exc:
@@ -280,9 +280,12 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))
         extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
                       "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
+        steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}, quantile baseline "
+                 f"{'kept' if cal.quantile_applied else 'not kept'}" if identity == "auto" else "")
+        extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied)})
         _log(log, f"identity: static landmark offset estimated on {len(cal.frames)} pilot frames "
-                  f"({moved:.3g} rig units rms); pilot residual {cal.rms_before:.2f} px with the rig's neutral, "
-                  f"{cal.rms_after:.2f} px calibrated")
+                  f"({moved:.3g} rig units rms){steps}; pilot residual {cal.rms_before:.2f} px with the rig's "
+                  f"neutral, {cal.rms_after:.2f} px calibrated")
     if ridge == "auto":
         v0 = r.neutral[idx]
         radius = float(np.sqrt(np.mean(np.sum((v0 - v0.mean(0)) ** 2, axis=1))))

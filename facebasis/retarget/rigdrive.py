@@ -57,10 +57,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.rig import Rig
-from .calibrate import IdentityCalibration, calibrate_identity
+from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .pose import (
     PI,
+    contour_weights,
+    whiten,
     fit_pose_affine,
     fit_pose_gn,
     pose_jacobian,
@@ -80,7 +82,14 @@ PRIOR_STD = 0.5
 #: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
 PILOT_FRAMES = 40
 #: how the person's neutral landmarks are obtained (see the module docstring and :mod:`.calibrate`)
-IDENTITY_MODES = ("auto", "first-frame", "rig")
+IDENTITY_MODES = ("auto", "first-frame", "rig", "quantile")
+#: weight of a contour landmark's residual along the contour, relative to across it (see
+#: :func:`.pose.contour_weights`): the jaw line of a 68-point capture slides along the face's outline
+CONTOUR_SLIDE = 0.05
+#: the 68-point iBUG jaw line (points 0-16), the contour of ``contour="auto"`` when L is 68
+IBUG_CONTOUR = tuple(range(17))
+#: sparsity of the weight prior: the linear term ``sparsity * rho * sum_i x_i`` (see the module docstring)
+DEFAULT_SPARSITY = 3.0
 #: default identity mode (measured in reports/reproduction/real_clips_notes.md and reports/retarget)
 DEFAULT_IDENTITY = "auto"
 
@@ -217,7 +226,9 @@ class RigRetargeter:
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
-                 first_frame_neutral: bool | None = None, identity: str | None = None):
+                 first_frame_neutral: bool | None = None, identity: str | None = None,
+                 contour="auto", contour_slide: float = CONTOUR_SLIDE,
+                 sparsity: float = DEFAULT_SPARSITY):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -244,6 +255,19 @@ class RigRetargeter:
         self.calibration: IdentityCalibration | None = None      # set by run() with identity "auto"
         self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() unless identity "rig"
         self.D = np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0))   # (L, 3, k)
+        L = len(self.indices)
+        if isinstance(contour, str):
+            if contour != "auto":
+                raise InputError(f"contour: expected 'auto' or landmark indices, found {contour!r}")
+            contour = IBUG_CONTOUR if L == 68 else ()
+        self.contour = np.asarray(contour, np.int64).reshape(-1)
+        if len(self.contour) and (self.contour.min() < 0 or self.contour.max() >= L):
+            raise InputError(f"contour: expected landmark indices in [0, {L}), found {self.contour.tolist()}")
+        for name, v in (("contour_slide", contour_slide), ("sparsity", sparsity)):
+            if not np.isfinite(v) or v < 0:
+                raise InputError(f"{name}: expected a finite number >= 0, found {v}")
+        self.contour_slide = float(contour_slide)
+        self.sparsity = float(sparsity)
         self._ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -258,20 +282,23 @@ class RigRetargeter:
         """Rig landmark positions (L, 3) at weights x (k,)."""
         return self.v0 + self.D @ x
 
-    def _weights(self, p, vis, s, R, t, x_prev, x_cur):
+    def _weights(self, p, vis, s, R, t, x_prev, x_cur, sqrtw=None):
         """x | pose: the certified weight solve (eq. 5 form) of one frame."""
         from ..rigging.certify import CertifiedWeightSolver
         from ..rigging.weightproblem import WeightProblem
 
-        E = np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes)   # (2Lv, k)
-        b = (((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1)                      # rig units
+        E = whiten(np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes), sqrtw)  # (2Lv, k)
+        b = whiten((((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1), sqrtw)                # rig units
         # variable projection: the pose may still move along its 6 linearised directions (at the
         # current landmarks), so the weights see the data with those directions projected out
-        Qp, _ = np.linalg.qr(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T))
+        Qp, _ = np.linalg.qr(whiten(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T), sqrtw))
         E = E - Qp @ (Qp.T @ E)
         b = b - Qp @ (Qp.T @ b)
         G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
         c = E.T @ b
+        lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see the module docstring
+        if lin > 1e-6 * np.trace(G) / len(G):     # smaller moves no weight by 1e-6 (and makes DAQP cycle on
+            c = c - 0.5 * lin                     # near-singular problems such as ridge 1e-9 on exact data)
         lam = self.smooth + self.ridge
         prior = (self.smooth / lam) * x_prev            # mu||x - x_prev||^2 + rho||x||^2, completed square
         problem = WeightProblem(G, c[None], np.array([b @ b]), self.pairs, prior[None], lam)   # eq. 5, one frame
@@ -302,14 +329,16 @@ class RigRetargeter:
         else:
             x_prev, s, R, t = state
             n_alt = self.alternations
+        W = contour_weights(p, self.contour, self.contour_slide)
+        W = None if W is None else W[vis]
         x, nodes = x_prev.copy(), 0
         for _ in range(n_alt):
-            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3)
+            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
             x_old = x
-            x, nodes = self._weights(p, vis, s, R, t, x_prev, x)
+            x, nodes = self._weights(p, vis, s, R, t, x_prev, x, W)
             if np.abs(x - x_old).max() <= self.tol:
                 break
-        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3)
+        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
         return x, s, R, t, rms, nodes
 
     def _adopt_first_frame(self, p, vis):
@@ -339,8 +368,8 @@ class RigRetargeter:
         """
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
-        keep = self.smooth, self.ridge
-        self.smooth, self.ridge = 0.0, RIDGE_FLOOR
+        keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
+        self.smooth, self.ridge, self.sparsity, self.contour_slide = 0.0, RIDGE_FLOOR, 0.0, 1.0
         out = []
         try:
             for f in frames:
@@ -350,7 +379,7 @@ class RigRetargeter:
                 if np.isfinite(rms) and s > 0:
                     out.append(rms / s)
         finally:
-            self.smooth, self.ridge = keep
+            self.smooth, self.ridge, self.sparsity, self.contour_slide = keep
         return float(np.median(out)) if out else float("nan")
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -371,6 +400,8 @@ class RigRetargeter:
         if self.identity == "first-frame":
             self._adopt_first_frame(np.nan_to_num(P[0]), vis[0])
         elif self.identity == "auto":
+            self.calibration = calibrate_auto(self, np.nan_to_num(P), vis)
+        elif self.identity == "quantile":
             self.calibration = calibrate_identity(self, np.nan_to_num(P), vis)
         if self.auto:
             if self.calibration is not None and np.isfinite(self.calibration.noise):

@@ -106,16 +106,43 @@ def _default_face_mesh():
     return rig.neutral, rig.faces, face_landmarks()
 
 
-def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> dict:
-    """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
-    (T, n, 3), faces), ``animation.glb`` (see :meth:`MeshDriver.morph_basis`) and ``summary.json``."""
+def _mesh_or_rig_neutral(mesh, neutral: str = "neutral.obj", exclude=(), log=None):
+    """(V, F) of ``--mesh``: a mesh file, or a rig folder's neutral (``--neutral``, ``--exclude`` as
+    ``transfer``'s; the folder's warning, :func:`facebasis.geometry.rig.rig_folder_warning`)."""
+    from pathlib import Path
+
     from ..geometry.meshio import read_mesh
+    from ..geometry.rig import load_rig_folder, rig_folder_warning
+
+    exclude = tuple(exclude or ())
+    if mesh is not None and Path(mesh).is_dir():
+        rig = load_rig_folder(mesh, neutral, exclude)
+        warning = rig_folder_warning(rig)
+        if warning:
+            _log(log, warning)
+        return rig.neutral, rig.faces
+    given = ([f"--exclude {' '.join(exclude)}"] if exclude else []) + \
+        ([f"--neutral {neutral}"] if neutral != "neutral.obj" else [])
+    if given:
+        raise InputError(f"{', '.join(given)}: expected a rig folder as --mesh, found "
+                         f"{'the built-in face' if mesh is None else f'the mesh file {mesh}'}")
+    return read_mesh(mesh) if mesh is not None else None
+
+
+def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, neutral: str = "neutral.obj",
+                  exclude=(), preview: bool = True) -> dict:
+    """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
+    (T, n, 3), faces), ``animation.glb`` (see :meth:`MeshDriver.morph_basis`), ``preview.mp4`` (unless
+    ``preview`` is False: the source video beside the driven mesh, :mod:`.preview`) and
+    ``summary.json``. ``mesh`` may be a rig folder: its neutral (``neutral``, files matching an
+    ``exclude`` glob left out) is driven."""
     from .animation import animated_glb_bytes, frame_times
     from .drive3d import MeshDriver
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
     cap = read_capture(capture_dir)
+    mesh_vf = _mesh_or_rig_neutral(mesh, neutral, exclude, log)
     if mesh is None:
         V, F, idx = _default_face_mesh()
         if landmarks is not None:
@@ -125,7 +152,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
         if landmarks is None:
             raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
                              f"found none")
-        V, F = read_mesh(mesh)
+        V, F = mesh_vf
         idx = read_indices(landmarks)
         name = str(mesh)
     idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
@@ -147,6 +174,9 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
                    "morph_targets": len(names), "animation_max_vertex_error": glb_error,
                    "seconds": time.perf_counter() - t0,
                    "z": "unchanged (monocular capture: in-plane motion only)"}
+        if preview:
+            summary.update(_write_previews(stage, capture_dir, cap, V, F, None, None, lambda f: anim.vertices[f],
+                                           None, log))
         atomic_write_json(stage / "summary.json", summary)
     return summary
 
@@ -154,13 +184,22 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None) -> 
 # ----------------------------------------------------------------------------------------------
 # rig
 
-def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_landmarks: int | None = None):
-    """(rig, landmark indices, default exclusive pairs) for ``--rig`` (None/"default": built-in face)."""
-    from ..geometry.rig import load_rig_folder
+def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_landmarks: int | None = None,
+                      exclude=(), log=None):
+    """(rig, landmark indices, default exclusive pairs) for ``--rig`` (None/"default": built-in face).
+
+    ``exclude``: globs of rig-folder files to leave out (``--exclude``, as ``transfer``'s); a folder
+    whose shapes look like identity modes or are many gets a one-line warning through ``log``
+    (:func:`facebasis.geometry.rig.rig_folder_warning`)."""
+    from ..geometry.rig import load_rig_folder, rig_folder_warning
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
+    exclude = tuple(exclude or ())
     if rig is None or str(rig) == "default":
+        if exclude:
+            raise InputError(f"--exclude: expected a rig folder (--rig RIG_DIR) to leave files out of, found the "
+                             f"built-in face (--exclude {' '.join(exclude)})")
         from ..defaults.face import EXCLUSIVE_PAIRS, default_template
         from ..defaults.face_landmarks import face_landmarks
 
@@ -170,9 +209,12 @@ def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_
     else:
         if landmarks is None:
             raise InputError(f"--landmarks: expected a JSON file of vertex indices of rig {rig}, found none")
-        r = load_rig_folder(rig, neutral)
+        r = load_rig_folder(rig, neutral, exclude)
         idx = read_indices(landmarks)
         default_pairs = ()
+        warning = rig_folder_warning(r)
+        if warning:
+            _log(log, warning)
     n = len(idx) if n_landmarks is None else n_landmarks
     idx = check_landmark_indices(idx, r.n_vertices, n,
                                  f"landmark index file {landmarks}" if landmarks else "built-in face landmarks")
@@ -243,14 +285,18 @@ FIRST_FRAME_HINT = 0.03
 
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
-                 identity: str | None = None, log=None) -> dict:
+                 identity: str | None = None, exclude=(), preview: bool = True, log=None) -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
     (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
+    ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    (the source video beside the rig rendered with the solved weights and head rotation) and
+    ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
     from ..rigging.examples import parse_pairs
+    from .preview import rig_frames
     from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
     ridge = _parse_ridge(ridge)
@@ -263,7 +309,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     except InputError as exc:
         raise InputError(f"--identity and --first-frame-neutral: {str(exc).split(': ', 1)[1]}") from None
     cap = read_capture(capture_dir)
-    r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
+    r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks, exclude, log)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
@@ -299,8 +345,26 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                       "rig's, or its landmarks are defined differently); --identity auto (the default) estimates "
                       "the person's neutral from the capture, --identity first-frame takes frame 0 as it")
     with atomic_directory(out_dir) as stage:
+        if preview:
+            extra.update(_write_previews(stage, capture_dir, cap, r.neutral, r.faces, r.names, result.weights,
+                                         rig_frames(r, result.weights), result.rotation, log))
         summary = write_retarget_outputs(stage, r, result, named, extra)
     return summary
+
+
+def _write_previews(stage, capture_dir, cap, rest, faces, names, weights, frame_vertices, rotation, log) -> dict:
+    """``preview.mp4`` (+ ``weights.png`` when there are weights) into ``stage``; summary entries."""
+    from .preview import plot_weights, source_video, write_preview
+
+    video = source_video(capture_dir, cap)
+    st = write_preview(stage / "preview.mp4", rest, faces, frame_vertices, cap.n_frames, cap.fps, rotation, video)
+    out = {"preview_frames": st.frames, "preview_size": [st.width, st.height], "preview_ms_per_frame": st.ms_per_frame,
+           "preview_source": st.source}
+    if weights is not None:
+        out["weights_plot_shapes"] = plot_weights(stage / "weights.png", list(names), weights, cap.fps)
+    _log(log, f"preview: {st.frames} frames {st.width}x{st.height}"
+              + (f" beside {video}" if video is not None else "") + f", {st.ms_per_frame:.1f} ms per frame")
+    return out
 
 
 __all__ = ["run_animate2d", "run_animate3d", "run_retarget", "load_retarget_rig", "write_retarget_outputs",

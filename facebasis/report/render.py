@@ -149,7 +149,8 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     # z-buffer key: the triangle's mean depth quantised to 2^20 levels in the high bits, its index in
     # the low ones (no sort: the largest key at a pixel is the nearest triangle)
     z = tri[:, 0, 2] + tri[:, 1, 2] + tri[:, 2, 2]
-    zq = ((z - z.min()) * ((2 ** 20 - 1) / max(float(z.max() - z.min()), 1e-300))).astype(np.int64)
+    span = float(z.max() - z.min())
+    zq = ((z - z.min()) * ((2 ** 20 - 1) / span if span > 0 else 0.0)).astype(np.int64)
     key = (zq << 22) | np.arange(len(z), dtype=np.int64)
     # per triangle and edge (a -> b): x at the row, x = xa + (y - ya) dx/dy, on ya <= y <= yb
     a, b = tri[:, [0, 1, 2], :2], tri[:, [1, 2, 0], :2]                  # (m, 3, 2)

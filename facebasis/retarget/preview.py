@@ -27,6 +27,8 @@ from .pose import PI
 MAIN_SHAPES = 8
 #: part of the panel height the neutral head fills
 FILL = 0.9
+#: libx264 preset of the preview (measured 1.6 against 3.5 ms CPU per 700x300 frame for "veryfast")
+PRESET = "ultrafast"
 #: default panel size (height, width) when there is no source video
 PANEL = (300, 300)
 
@@ -128,7 +130,7 @@ def write_preview(path, rest, faces, frame_vertices, n_frames: int, fps: float, 
                 img = np.concatenate([np.full((img.shape[0], shape["left"], 3), 255, np.uint8), img], 1)
             yield img
 
-    n = write_mp4(path, frames(), fps)
+    n = write_mp4(path, frames(), fps, preset=PRESET)
     seconds = time.perf_counter() - t0
     width = renderer.size[1] + shape.get("left", 0)
     return PreviewStats(n, width - width % 2, renderer.size[0] - renderer.size[0] % 2, seconds,

@@ -15,8 +15,15 @@ previous frame, pose and weights are alternated:
   projection), so one round per warm-started frame is enough (about 12 rounds without it);
 * x | pose: the package's weight model (seed 000, eq. 5, with the data term of the model above)
 
-      min_x  (1/s^2) || A x - b ||^2 + mu || x - x_prev ||^2 + rho || x ||^2
+      min_x  (1/s^2) || W (A x - b) ||^2 + mu || x - x_prev ||^2 + rho || x ||^2 + sparsity rho sum_i x_i
       s.t.   0 <= x <= 1,   x_a x_b = 0 for exclusive pairs (a, b),
+
+  W the per-landmark weights of the noise model (identity, except on a contour: the jaw line of a
+  68-point capture, whose residual along the contour counts ``contour_slide`` = 0.05, see
+  :func:`.pose.contour_weights`; the pose step uses the same W), and the linear term the
+  exponential (sparse) part of the weight prior (default ``sparsity`` 3: with the Gaussian part it
+  is a Gaussian of standard deviation 0.5 centred at -1.5, truncated to [0, 1]: a weight stays at 0
+  unless the landmarks push it; measured in reports/retarget/plausibility.md);
 
   the data term measured in rig units (divided by s^2), mu the temporal smoothness (default 0.05),
   rho the ridge that keeps shapes the landmarks cannot see, or cannot tell from noise, at zero. Since
@@ -42,8 +49,10 @@ noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 p
 weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
 
 Identity (``identity``): the rig's neutral landmarks are not the filmed person's. ``"auto"`` (the
-default) estimates a static landmark offset from the capture (:mod:`.calibrate`): the baseline of
-shapes that stay on through nearly all of it plus the median in-plane residual; ``"first-frame"``
+default) estimates a static landmark offset from the capture (:func:`.calibrate.calibrate_auto`):
+the rest face (median of the densest quarter of the pilot faces) and on top of it the baseline of
+shapes that stay on through nearly all of it plus the median in-plane residual, or that second
+step alone (``"quantile"``, the default before issue 23), whichever fits the pilot frames better; ``"first-frame"``
 takes frame 0 as the neutral (wrong when the capture starts on an expression; the former
 ``first_frame_neutral=True``); ``"rig"`` uses the rig's neutral as it is.
 """

@@ -86,9 +86,10 @@ class MeshRenderer:
 
 def rig_frames(rig: Rig, weights):
     """``f -> (n, 3)`` vertices of the rig at frame f's weights (weights (T, k))."""
-    W = np.asarray(weights, np.float64)
-    D = np.ascontiguousarray(rig.deltas.reshape(rig.n_shapes, -1))      # (k, 3n)
-    return lambda f: rig.neutral + (W[f] @ D).reshape(-1, 3)
+    W = np.asarray(weights, np.float32)
+    D = np.ascontiguousarray(rig.deltas.reshape(rig.n_shapes, -1), np.float32)   # (k, 3n): float32 halves
+    V0 = rig.neutral.astype(np.float32)                                         # the per-frame traffic
+    return lambda f: V0 + (W[f] @ D).reshape(-1, 3)
 
 
 def write_preview(path, rest, faces, frame_vertices, n_frames: int, fps: float, rotation=None, source=None,

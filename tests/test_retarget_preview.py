@@ -11,7 +11,7 @@ from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.rig import Rig, rig_folder_warning, write_rig_folder
-from facebasis.report.render import rasterize_mesh
+from facebasis.geometry.raster import rasterize_mesh
 from facebasis.retarget.rigdrive import RigRetargeter
 from facebasis.retarget.synthetic import capture_from_landmarks, smooth_weight_curves, synthetic_capture
 

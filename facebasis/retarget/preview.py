@@ -2,7 +2,7 @@
 
 ``preview.mp4``: every frame of the capture's source video (or its overlay) on the left, on the
 right the rig's mesh with that frame's solved weights, turned by the solved head rotation R and
-rendered by the package's own rasteriser (:func:`facebasis.report.render.rasterize_mesh`, numpy,
+rendered by the package's own rasteriser (:func:`facebasis.geometry.raster.rasterize_mesh`, numpy,
 no OpenGL), at the source's height. The head keeps a fixed size and stays centred: the
 weak-perspective scale and translation only say where the head is in the picture, which the source
 already shows. Frames are encoded one at a time with PyAV (:func:`.media.write_mp4`), as the
@@ -73,7 +73,7 @@ class MeshRenderer:
     def render(self, vertices, rotation=None, out=None) -> np.ndarray:
         """RGB image (height, width, 3) uint8 of the mesh at ``vertices`` (n, 3), turned by
         ``rotation`` (3, 3) about the rest centre (image: ``Pi R``; z towards the viewer)."""
-        from ..report.render import rasterize_mesh
+        from ..geometry.raster import rasterize_mesh
 
         R = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
         V = (np.asarray(vertices, np.float64) - self.centre) @ R.T

@@ -176,3 +176,29 @@ def test_animate3d_rig_folder_neutral_exclude_and_preview(shipped, capsys):
     assert "--exclude identity*: expected a rig folder as --mesh, found the mesh file" in capsys.readouterr().err
     assert main(["animate3d", str(root / "capture"), "--neutral", "head.obj", "--out", str(root / "bad")]) == 2
     assert "--neutral head.obj: expected a rig folder as --mesh, found the built-in face" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------------------------
+# the noise model and the prior: options and their bad values
+
+def test_contour_weights_and_bad_noise_model_options():
+    from facebasis.errors import InputError
+    from facebasis.retarget.pose import contour_weights
+
+    p = np.stack([np.arange(5.0), np.zeros(5)], 1)                   # a straight contour along x
+    W = contour_weights(p, [0, 1, 2, 3], 0.04)
+    np.testing.assert_allclose(W[1] @ [1.0, 0.0], [0.2, 0.0])        # along it: sqrt(0.04)
+    np.testing.assert_allclose(W[1] @ [0.0, 1.0], [0.0, 1.0])        # across it: in full
+    np.testing.assert_allclose(W[4], np.eye(2))                      # not on the contour
+    assert contour_weights(p, [0, 1, 2], 1.0) is None and contour_weights(p, [], 0.05) is None
+    rig, idx = default_template(), face_landmarks()
+    assert list(RigRetargeter(rig, idx).contour) == list(range(17))  # the iBUG jaw line by default
+    for kw, msg in (({"sparsity": -1.0}, "sparsity: expected a finite number >= 0, found -1.0"),
+                    ({"contour_slide": float("nan")}, "contour_slide: expected a finite number >= 0, found nan"),
+                    ({"contour": [3, 68]}, r"contour: expected landmark indices in \[0, 68\), found \[3, 68\]"),
+                    ({"contour": "jaw"}, "contour: expected 'auto' or landmark indices, found 'jaw'")):
+        with pytest.raises(InputError, match=msg):
+            RigRetargeter(rig, idx, **kw)
+    fit = RigRetargeter(rig, idx).solve_frame(synthetic_capture(rig, idx, np.zeros((1, rig.n_shapes))).landmarks[0])
+    x, s, R, t, rms, nodes = fit                                     # FrameFit unpacks as the former tuple
+    assert fit.state[1] == s and rms < 1e-6 and np.abs(x).max() < 1e-6

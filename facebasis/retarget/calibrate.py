@@ -134,7 +134,6 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
     -------
     IdentityCalibration
     """
-    from .rigdrive import RIDGE_FLOOR
 
     P = np.asarray(landmarks, np.float64)
     vis = np.asarray(visible, bool)
@@ -151,19 +150,17 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
     Q = span_basis(solver.D[:, :2].reshape(2 * L, k))
     # plain least squares in the pilot fits (no sparsity, no contour sliding): the offset must
     # explain every landmark coordinate, the jaw line's along-contour position included
-    keep = solver.smooth, solver.ridge, solver.sparsity, solver.contour_slide
-    solver.smooth, solver.ridge, solver.sparsity, solver.contour_slide = 0.0, RIDGE_FLOOR, 0.0, 1.0
     states = [None] * F
     rms_first = rms = noise = noise_first = float("nan")
-    try:
+    with solver.pilot_settings():
         for rnd in range(rounds + 1):
             out = [solver.solve_frame(P[f], vis[f], states[j]) for j, f in enumerate(frames)]
-            states = [o[:4] for o in out]
-            X = np.array([o[0] for o in out])
-            S = np.array([o[1] for o in out])
-            Rs = np.array([o[2] for o in out])
-            Ts = np.array([o[3] for o in out])
-            res = np.array([o[4] for o in out])
+            states = [o.state for o in out]
+            X = np.array([o.x for o in out])
+            S = np.array([o.s for o in out])
+            Rs = np.array([o.R for o in out])
+            Ts = np.array([o.t for o in out])
+            res = np.array([o.rms for o in out])
             rms = float(np.nanmedian(res))
             noise = float(np.nanmedian(res / S))
             if rnd == 0:
@@ -186,8 +183,6 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
             solver.v0 = solver.v0 + delta
             baseline += c
             states = [(np.clip(x - c, 0.0, 1.0), s, R, t) for (x, s, R, t) in states]   # warm start
-    finally:
-        solver.smooth, solver.ridge, solver.sparsity, solver.contour_slide = keep
     if not rms <= (1.0 - MIN_GAIN) * rms_first:     # nothing static to explain (e.g. the rig's own face)
         solver.v0 = v_start
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, rms_first, rms_first, noise_first, False)
@@ -241,15 +236,9 @@ def densest_frames(offsets, share: float = REST_SHARE) -> np.ndarray:
 
 def _fitted_rms(solver, landmarks, visible, frames) -> float:
     """Median over the frames of the rms landmark residual (px) of the full fit (pose and weights,
-    ridge :data:`.rigdrive.RIDGE_FLOOR`, no temporal term, no sparsity) with the current ``v0``."""
-    from .rigdrive import RIDGE_FLOOR
-
-    keep = solver.smooth, solver.ridge, solver.sparsity
-    solver.smooth, solver.ridge, solver.sparsity = 0.0, RIDGE_FLOOR, 0.0
-    try:
-        res = [solver.solve_frame(landmarks[f], visible[f], None)[4] for f in frames]
-    finally:
-        solver.smooth, solver.ridge, solver.sparsity = keep
+    :meth:`.rigdrive.RigRetargeter.pilot_settings`) with the current ``v0``."""
+    with solver.pilot_settings():
+        res = [solver.solve_frame(landmarks[f], visible[f], None).rms for f in frames]
     return float(np.nanmedian(res))
 
 

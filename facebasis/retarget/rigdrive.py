@@ -60,6 +60,7 @@ takes frame 0 as the neutral (wrong when the capture starts on an expression; th
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -174,6 +175,29 @@ class RetargetResult:
     def rotation_vectors(self) -> np.ndarray:
         """(T, 3) rotation vectors (radians)."""
         return np.stack([rotation_to_vector(R) for R in self.rotation])
+
+
+@dataclass(frozen=True)
+class FrameFit:
+    """One frame's fit (:meth:`RigRetargeter.solve_frame`): weights x (k,), scale s (px per rig
+    unit), rotation R (3, 3), translation t (2,) px, rms landmark residual px (visible landmarks;
+    nan when too few were visible), branch-and-bound nodes. Unpacks as the former 6-tuple
+    ``x, s, R, t, rms, nodes``."""
+
+    x: np.ndarray
+    s: float
+    R: np.ndarray
+    t: np.ndarray
+    rms: float
+    nodes: int
+
+    @property
+    def state(self) -> tuple:
+        """(x, s, R, t): the warm start of the next frame."""
+        return self.x, self.s, self.R, self.t
+
+    def __iter__(self):
+        return iter((self.x, self.s, self.R, self.t, self.rms, self.nodes))
 
 
 def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
@@ -317,10 +341,22 @@ class RigRetargeter:
         sol = CertifiedWeightSolver(problem).solve_example(0, start=x_cur)
         return sol.x, sol.nodes
 
-    def solve_frame(self, p, visible=None, state=None):
+    @contextmanager
+    def pilot_settings(self):
+        """Within the block, frames are fitted as the pilot fits are: on their own (no temporal
+        term), ridge :data:`RIDGE_FLOOR`, no sparsity, the contour landmarks as fixed points (plain
+        least squares: what the neutral or the noise estimate must explain); restored after."""
+        keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
+        self.smooth, self.ridge, self.sparsity, self.contour_slide = 0.0, RIDGE_FLOOR, 0.0, 1.0
+        try:
+            yield self
+        finally:
+            self.smooth, self.ridge, self.sparsity, self.contour_slide = keep
+
+    def solve_frame(self, p, visible=None, state=None) -> FrameFit:
         """One frame: landmarks p (L, 2), visible (L,) bool, state = previous (x, s, R, t) or None.
 
-        Returns (x (k,), s, R, t, rms residual px, nodes).
+        Returns a :class:`FrameFit` (unpacks as ``x, s, R, t, rms, nodes``).
         """
         p = np.asarray(p, np.float64)
         vis = np.ones(len(p), bool) if visible is None else np.asarray(visible, bool)
@@ -330,7 +366,7 @@ class RigRetargeter:
                 raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
                                  f"found {int(vis.sum())}")
             x, s, R, t = state
-            return x.copy(), s, R.copy(), t.copy(), float("nan"), 0
+            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
         if state is None:
             x_prev = np.zeros(k)
             s, R, t = fit_pose_affine(self.v0[vis], p[vis])
@@ -348,7 +384,7 @@ class RigRetargeter:
             if np.abs(x - x_old).max() <= self.tol:
                 break
         s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
-        return x, s, R, t, rms, nodes
+        return FrameFit(x, float(s), R, t, float(rms), int(nodes))
 
     def _adopt_first_frame(self, p, vis):
         """Shift the rig's landmarks so that the neutral, posed on frame 0, matches it exactly.
@@ -377,18 +413,14 @@ class RigRetargeter:
         """
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
-        keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
-        self.smooth, self.ridge, self.sparsity, self.contour_slide = 0.0, RIDGE_FLOOR, 0.0, 1.0
         out = []
-        try:
+        with self.pilot_settings():
             for f in frames:
                 if visible[f].sum() < 4:
                     continue
-                _, s, _, _, rms, _ = self.solve_frame(landmarks[f], visible[f], None)
-                if np.isfinite(rms) and s > 0:
-                    out.append(rms / s)
-        finally:
-            self.smooth, self.ridge, self.sparsity, self.contour_slide = keep
+                fit = self.solve_frame(landmarks[f], visible[f], None)
+                if np.isfinite(fit.rms) and fit.s > 0:
+                    out.append(fit.rms / fit.s)
         return float(np.median(out)) if out else float("nan")
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -438,7 +470,7 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
     return RigRetargeter(rig, idx, pairs, smooth, ridge, **kw).run(landmarks, lost, fps)
 
 
-__all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
+__all__ = ["RigRetargeter", "RetargetResult", "FrameFit", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
            "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
            "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
            "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES", "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]

@@ -5,7 +5,8 @@
 A 400x300 source video of ``--frames`` frames is written to a temporary folder (generated moving
 gradients, so the benchmark needs no data), then :func:`facebasis.retarget.preview.write_preview`
 encodes it beside the rig (ICT-FaceKit's 14062-vertex / 28068-triangle head when the data is there,
-else the built-in face) rendered with smooth weight curves and head rotations. Reported: wall and
+else the built-in face) rendered with smooth weight curves and head rotations, framed on the face
+(its 68 landmark vertices, as ``retarget`` does). Reported: wall and
 CPU ms per frame of the whole preview (decoding the source, rendering, side by side, encoding),
 and of the rendering alone, with the load average (the machine may be shared).
 """
@@ -62,10 +63,15 @@ def main(argv=None) -> int:
         write_mp4(src, source_frames(T), 30.0)
         frame_v = rig_frames(rig, W)
         c0, t0 = time.process_time(), time.perf_counter()
-        st = write_preview(Path(tmp) / "preview.mp4", rig.neutral, rig.faces, frame_v, T, 30.0, Rs, src)
+        focus = None
+        if args.rig == "ict" and rig.source == "ICT-FaceKit":
+            from problems.ict import _load
+
+            focus = _load()["landmarks68"]
+        st = write_preview(Path(tmp) / "preview.mp4", rig.neutral, rig.faces, frame_v, T, 30.0, Rs, src, focus=focus)
         cpu = 1e3 * (time.process_time() - c0) / T
         wall = 1e3 * (time.perf_counter() - t0) / T
-        r = MeshRenderer(rig.neutral, rig.faces, (300, 300))
+        r = MeshRenderer(rig.neutral, rig.faces, (300, 300), focus)
         n_r = min(T, 200)
         c0, t0 = time.process_time(), time.perf_counter()
         for f in range(n_r):

@@ -176,7 +176,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, log=None, neu
                    "z": "unchanged (monocular capture: in-plane motion only)"}
         if preview:
             summary.update(_write_previews(stage, capture_dir, cap, V, F, None, None, lambda f: anim.vertices[f],
-                                           None, log))
+                                           None, log, focus=idx))
         atomic_write_json(stage / "summary.json", summary)
     return summary
 
@@ -347,17 +347,19 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     with atomic_directory(out_dir) as stage:
         if preview:
             extra.update(_write_previews(stage, capture_dir, cap, r.neutral, r.faces, r.names, result.weights,
-                                         rig_frames(r, result.weights), result.rotation, log))
+                                         rig_frames(r, result.weights), result.rotation, log, focus=idx))
         summary = write_retarget_outputs(stage, r, result, named, extra)
     return summary
 
 
-def _write_previews(stage, capture_dir, cap, rest, faces, names, weights, frame_vertices, rotation, log) -> dict:
+def _write_previews(stage, capture_dir, cap, rest, faces, names, weights, frame_vertices, rotation, log,
+                    focus=None) -> dict:
     """``preview.mp4`` (+ ``weights.png`` when there are weights) into ``stage``; summary entries."""
     from .preview import plot_weights, source_video, write_preview
 
     video = source_video(capture_dir, cap)
-    st = write_preview(stage / "preview.mp4", rest, faces, frame_vertices, cap.n_frames, cap.fps, rotation, video)
+    st = write_preview(stage / "preview.mp4", rest, faces, frame_vertices, cap.n_frames, cap.fps, rotation, video,
+                       focus=focus)
     out = {"preview_frames": st.frames, "preview_size": [st.width, st.height], "preview_ms_per_frame": st.ms_per_frame,
            "preview_source": st.source}
     if weights is not None:

@@ -255,6 +255,12 @@ class RigRetargeter:
         from showing up as expression (see :meth:`run`)
     first_frame_neutral : older spelling: True is ``identity="first-frame"``, False ``"rig"``
     solver : "certified" (branch and bound, default) or "ipopt" (CasADi/IPOPT polished by it)
+    contour : landmark indices of a silhouette contour whose points may slide along it; "auto" (the
+        default): the iBUG jaw line 0-16 when there are 68 landmarks, else none
+    contour_slide : weight of a contour landmark's residual along the contour (:data:`CONTOUR_SLIDE`;
+        1 measures it as every other landmark), see :func:`.pose.contour_weights`
+    sparsity : the exponential part of the weight prior, ``sparsity * rho * sum_i x_i``
+        (:data:`DEFAULT_SPARSITY`; 0 leaves the Gaussian ridge alone)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,

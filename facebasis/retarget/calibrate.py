@@ -236,8 +236,8 @@ def densest_frames(offsets, share: float = REST_SHARE) -> np.ndarray:
 
 def _fitted_rms(solver, landmarks, visible, frames) -> float:
     """Median over the frames of the rms landmark residual (px) of the full fit (pose and weights,
-    :meth:`.rigdrive.RigRetargeter.pilot_settings`) with the current ``v0``."""
-    with solver.pilot_settings():
+    :meth:`.rigdrive.RigRetargeter.pilot_settings` with the contour sliding) with the current ``v0``."""
+    with solver.pilot_settings(plain=False):           # the contour slides, as in the frames' solve
         res = [solver.solve_frame(landmarks[f], visible[f], None).rms for f in frames]
     return float(np.nanmedian(res))
 

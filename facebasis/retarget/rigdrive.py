@@ -348,12 +348,16 @@ class RigRetargeter:
         return sol.x, sol.nodes
 
     @contextmanager
-    def pilot_settings(self):
+    def pilot_settings(self, plain: bool = True):
         """Within the block, frames are fitted as the pilot fits are: on their own (no temporal
-        term), ridge :data:`RIDGE_FLOOR`, no sparsity, the contour landmarks as fixed points (plain
-        least squares: what the neutral or the noise estimate must explain); restored after."""
+        term), ridge :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as
+        fixed points (plain least squares: what the neutral or the noise estimate must explain;
+        ``plain=False`` keeps the contour's sliding, to compare fits as the frames will be
+        solved); restored after."""
         keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
-        self.smooth, self.ridge, self.sparsity, self.contour_slide = 0.0, RIDGE_FLOOR, 0.0, 1.0
+        self.smooth, self.ridge, self.sparsity = 0.0, RIDGE_FLOOR, 0.0
+        if plain:
+            self.contour_slide = 1.0
         try:
             yield self
         finally:

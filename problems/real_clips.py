@@ -201,7 +201,8 @@ def run_clip(clip: str, work: Path, rig_dir: Path, idx_json: Path, max_frames, u
         pairs = [f"{a}:{b}" for a, b in ICT_EXCLUSIVE + (BROW_PAIRS if brows else ())]
         rdir = work / clip / f"retarget_{variant}"
         c0 = time.process_time()
-        summ = run_retarget(cap_dir, rdir, rig=rig_dir, landmarks=idx_json, exclusive=pairs, identity=identity)
+        summ = run_retarget(cap_dir, rdir, rig=rig_dir, landmarks=idx_json, exclusive=pairs, identity=identity,
+                            preview=False)
         cpu = time.process_time() - c0
         names, W, rv, resid = read_retarget(rdir)
         ypr = euler_deg(rv)

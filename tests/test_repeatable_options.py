@@ -69,6 +69,7 @@ BASE = {
     "export": ["export", "R", "--out", "r.glb"],
     "verify": ["verify", "RUN"],
     "retarget": ["retarget", "CAP", "--out", "o"],
+    "animate3d": ["animate3d", "CAP", "--out", "o"],
 }
 
 

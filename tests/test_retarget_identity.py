@@ -101,7 +101,7 @@ def test_identity_values_and_the_older_spelling():
     assert resolve_identity(None, True) == "first-frame"
     assert resolve_identity(None, False) == "rig"
     assert resolve_identity("first-frame", True) == "first-frame"
-    with pytest.raises(InputError, match="identity: expected one of auto, first-frame, rig, found 'neutral'"):
+    with pytest.raises(InputError, match="identity: expected one of auto, first-frame, rig, quantile, found 'neutral'"):
         resolve_identity("neutral")
     with pytest.raises(InputError, match="found identity='auto' and first_frame_neutral=True"):
         RigRetargeter(default_template(), face_landmarks(), identity="auto", first_frame_neutral=True)
@@ -126,7 +126,7 @@ def test_cli_identity_option(person, tmp_path, capsys):
     assert "older spelling of --identity first-frame" in capsys.readouterr().out
     assert json.loads((tmp_path / "f" / "summary.json").read_text())["identity"] == "first-frame"
     assert main(["retarget", str(folder), "--out", str(tmp_path / "bad"), "--identity", "person"]) == 2
-    assert "--identity: expected one of auto, first-frame, rig, found 'person'" in capsys.readouterr().err
+    assert "--identity: expected one of auto, first-frame, rig, quantile, found 'person'" in capsys.readouterr().err
     assert main(["retarget", str(folder), "--out", str(tmp_path / "bad"), "--identity", "rig",
                  "--first-frame-neutral"]) == 2
     assert "--first-frame-neutral: expected no other --identity, found --identity rig" in capsys.readouterr().err

@@ -179,8 +179,9 @@ def test_first_frame_neutral_absorbs_a_different_face_shape(face):
     e_plain = np.abs(plain.weights - X)[:, k].mean()
     e_adapted = np.abs(adapted.weights - X)[:, k].mean()
     # the shift is in frame 0's image plane (no depth), so under +-5 degrees of head rotation it is
-    # approximate: 0.04 against 0.24 without it; without head rotation it is exact
-    assert e_adapted < 0.25 * e_plain
+    # approximate: 0.039 against 0.126 without it (0.171 before the sparse prior and the sliding jaw
+    # line); without head rotation it is exact
+    assert e_adapted < 0.4 * e_plain
     assert e_adapted < 0.06
     assert adapted.residual.mean() < plain.residual.mean()
     still = synthetic_capture(other, idx, X, noise_px=0.0, seed=9, amplitude_deg=0.0)
@@ -228,12 +229,17 @@ def test_auto_ridge_keeps_a_calm_face_of_another_shape_calm(face):
     other = rig.with_neutral(default_person().neutral, rig.deltas, "other face")
     calm = np.zeros((120, rig.n_shapes))
     cap = synthetic_capture(other, idx, calm, noise_px=1.0, seed=4, amplitude_deg=10.0)
-    fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR)
-    auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS)
-    # measured: floor 0.16 mean weight, 3.8% of weights > 0.95; auto (ridge ~0.34) 0.08, none
+    fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR, identity="rig")
+    auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, identity="rig")
+    # measured with the rig's neutral: floor 0.14 mean weight, 1.8% of weights > 0.95; auto 0.005, none
     assert (fixed.weights > 0.95).mean() > 0.01
     assert (auto.weights > 0.95).mean() == 0.0
     assert auto.weights.mean() < 0.6 * fixed.weights.mean()
     assert auto.residual.mean() < fixed.residual.mean() + 0.5        # the fit barely changes (px)
     P = rig.index([n for ab in EXCLUSIVE_PAIRS for n in ab]).reshape(-1, 2)
     assert np.abs(auto.weights[:, P[:, 0]] * auto.weights[:, P[:, 1]]).max() == 0.0
+    # the defaults (identity "auto": the rest face is this calm face) keep every frame near rest:
+    # median over frames of the largest weight 0.13 (0.73 with the rig's neutral and the floor ridge)
+    default = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS)
+    assert default.calibration.rest_applied
+    assert np.median(default.weights.max(1)) < 0.15

@@ -27,7 +27,8 @@ def cmd_animate2d(args) -> int:
 def cmd_animate3d(args) -> int:
     from ..retarget.pipeline import run_animate3d
 
-    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, head=args.head, log=print, unit=args.unit)
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, head=args.head, log=print, unit=args.unit,
+                      neutral=args.neutral, exclude=args.exclude, preview=not args.no_preview)
     print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
     return 0
 
@@ -48,8 +49,8 @@ def cmd_retarget(args) -> int:
         print("note: --first-frame-neutral is the older spelling of --identity first-frame (it still works)")
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      ridge=args.ridge, neutral=args.neutral,
-                     identity="first-frame" if args.first_frame_neutral else args.identity, log=print,
-                     animate_pose=not args.no_pose, unit=args.unit)
+                     identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
+                     preview=not args.no_preview, log=print, animate_pose=not args.no_pose, unit=args.unit)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -89,8 +90,15 @@ def register(subparsers) -> None:
                     "plane, scaled to the mesh) and deform the rest smoothly. Writes frames.npz and an "
                     "animated animation.glb.")
     p.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder with track.npz")
-    p.add_argument("--mesh", default=None, metavar="FACE.obj",
-                   help="target mesh facing +z with y up (default: the built-in face)")
+    p.add_argument("--mesh", default=None, metavar="FACE.obj|RIG_DIR",
+                   help="target mesh facing +z with y up, or a rig folder whose neutral is driven (default: the "
+                        "built-in face)")
+    p.add_argument("--neutral", default="neutral.obj",
+                   help="file name of the neutral inside a rig folder given as --mesh (default neutral.obj)")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+    p.add_argument("--no-preview", action="store_true",
+                   help="do not write preview.mp4 (the source video beside the driven mesh)")
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
                    help="JSON list of the mesh's vertex indices, one per capture landmark (needed with --mesh)")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",
@@ -109,7 +117,15 @@ def register(subparsers) -> None:
     p.add_argument("--rig", default=None, metavar="RIG_DIR",
                    help="rig folder (neutral + one mesh per blendshape), or 'default' for the built-in face "
                         "(the default)")
-    p.add_argument("--neutral", default="neutral.obj", help="file name of the neutral inside the rig folder")
+    p.add_argument("--neutral", default="neutral.obj",
+                   help="file name of the neutral inside the rig folder (default neutral.obj)")
+    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*' for an "
+                        "ICT-FaceKit FaceXModel folder; a folder whose shape names look like identity modes, or "
+                        "that has more than 100 shapes, gets a warning")
+    p.add_argument("--no-preview", action="store_true",
+                   help="do not write preview.mp4 (the source video beside the rig rendered with the solved "
+                        "weights and head rotation) and weights.png (the main weights over time)")
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
                    help="JSON list of the rig's vertex indices, one per capture landmark (needed with a rig folder)")
     p.add_argument("--exclusive", action="extend", nargs="+", default=[], metavar="SHAPE_A:SHAPE_B",
@@ -128,14 +144,16 @@ def register(subparsers) -> None:
                         "0.001 on noise-free data, about 0.2 on a webcam clip with --first-frame-neutral, so "
                         "shapes stop saturating on noise and face-shape differences (see reports/reproduction). "
                         "A number fixes it")
-    p.add_argument("--identity", default=None, metavar="auto|first-frame|rig",
+    p.add_argument("--identity", default=None, metavar="auto|first-frame|rig|quantile",
                    help="how the filmed person's neutral face is obtained, so that the difference between their "
                         "face and the rig's is not read as expression. 'auto' (default): estimated from the capture, "
-                        "no neutral frame needed: shapes that stay on through nearly all of it (the lowest 10%% of "
-                        "their weights on 40 pilot frames) become part of the neutral, plus the median landmark "
-                        "residual that no shape can produce; kept only if it lowers the pilot residual by 10%% or "
-                        "more. 'first-frame': frame 0 shows the neutral face (wrong if the capture starts on an "
-                        "expression). 'rig': the rig's own neutral")
+                        "no neutral frame needed: the rest face (the median of the densest quarter of 100 pilot "
+                        "faces, posed on the rig's neutral; kept if it fits the pilot frames better), then shapes "
+                        "that stay on through nearly all of it (the lowest 10%% of their weights on 40 pilot frames) "
+                        "plus the median landmark residual no shape can produce; of the two calibrations (with and "
+                        "without the rest face) the one that fits the pilot frames better is kept. 'quantile': the "
+                        "second step alone (the default before). 'first-frame': frame 0 shows the neutral face "
+                        "(wrong if the capture starts on an expression). 'rig': the rig's own neutral")
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="older spelling of --identity first-frame (still accepted)")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",

@@ -20,6 +20,7 @@ gltf        a rig as glTF 2.0 (.glb/.gltf, metres, normals, UVs, materials) with
 rigid       similarity alignment of a template to a scan (landmarks, or orientation search + trimmed ICP)
 nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closest points on a scan
 registration  scans of any topology to meshes in the template's topology (rigid + non-rigid ICP)
+raster      flat-shaded numpy rasterisation of a mesh into an image (preview videos; no OpenGL)
 
 References
 ----------

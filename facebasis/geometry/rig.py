@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import fnmatch
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -185,6 +186,35 @@ def load_rig_folder(
     return Rig(V0, F0, tuple(names), np.stack(deltas), source=str(folder), layout=layout)
 
 
+#: shape names that look like identity (face-shape) modes rather than expressions: ICT-FaceKit's
+#: ``identity000``..``identity099``, and ``id_*`` / ``id<digits>`` spellings
+IDENTITY_NAME = re.compile(r"^(identity|id_|id\d)", re.IGNORECASE)
+#: more shapes than this in a folder gets a warning (a FACS/ARKit rig has 50-60 expressions)
+MANY_SHAPES = 100
+
+
+def rig_folder_warning(rig: Rig, option: str = "--exclude") -> str | None:
+    """A one-line warning for a rig folder that is probably not only expressions, or None.
+
+    Shape names that look like identity modes (:data:`IDENTITY_NAME`) are named (the first few and
+    how many) with the ``option`` glob that leaves them out; otherwise a folder of more than
+    :data:`MANY_SHAPES` shapes is said to be large. Solved as expressions, identity modes take
+    every frame's face-shape difference (and the solve grows with the number of shapes).
+    """
+    ident = [n for n in rig.names if IDENTITY_NAME.match(n)]
+    if ident:
+        prefixes = sorted({IDENTITY_NAME.match(n).group(1).lower().rstrip("0123456789") for n in ident})
+        globs = " ".join(f"{option} '{p}*'" for p in prefixes)
+        shown = ", ".join(ident[:3]) + (f", ... ({len(ident)} of {rig.n_shapes} shapes)" if len(ident) > 3 else
+                                          f" ({len(ident)} of {rig.n_shapes} shapes)")
+        return (f"warning: rig folder {rig.source}: shape names that look like identity modes, not expressions: "
+                f"{shown}; leave them out with {globs}")
+    if rig.n_shapes > MANY_SHAPES:
+        return (f"warning: rig folder {rig.source}: {rig.n_shapes} shapes (more than {MANY_SHAPES}), all solved as "
+                f"expressions; leave out what is not one with {option} GLOB")
+    return None
+
+
 def write_rig_folder(out_dir: str | os.PathLike, rig: Rig, neutral_name: str | None = "neutral.obj",
                      layout=None) -> list[str]:
     """Write ``<shape>.obj`` (absolute positions) for every shape, plus the neutral, atomically
@@ -221,27 +251,6 @@ def write_shapes(stage: Path, rig: Rig, neutral_name: str | None = "neutral.obj"
     for name, d in progress(zip(rig.names, rig.deltas), total=rig.n_shapes, desc="writing shapes"):
         atomic_write_bytes(stage / f"{name}.obj", layout.obj_bytes(rig.neutral + d))
     return copy_side_files(layout, stage)
-
-
-#: more shapes than a facial expression rig usually has (ARKit: 52, ICT: 53; FACS-based rigs ~100)
-MANY_SHAPES = 100
-
-
-def rig_folder_warning(rig: Rig, option: str = "--exclude") -> str | None:
-    """A one-line warning when a rig folder looks as it ships rather than as a rig: shape names
-    like identity modes (``identity000``, ICT-FaceKit's FaceXModel) or more than :data:`MANY_SHAPES`
-    shapes; None otherwise."""
-    import re
-
-    ident = [s for s in rig.names if re.fullmatch(r"(?i)(identity|id|pca|mode)[_-]?\d+", s)]
-    if ident:
-        shown = ", ".join(ident[:3]) + (f", ... ({len(ident)} in all)" if len(ident) > 3 else "")
-        return (f"warning: {rig.source}: {len(ident)} shapes look like identity modes ({shown}), not expressions; "
-                f"leave them out with {option} 'identity*'")
-    if rig.n_shapes > MANY_SHAPES:
-        return (f"warning: {rig.source}: {rig.n_shapes} shapes, more than a facial expression rig usually has "
-                f"({MANY_SHAPES}); leave shapes out with {option} GLOB")
-    return None
 
 
 def load_target_neutral(path: str | os.PathLike, template: Rig) -> np.ndarray:

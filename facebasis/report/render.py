@@ -98,3 +98,9 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     ax.set_aspect("equal")
     ax.axis("off")
     return mapper if mapper is not None else coll
+
+
+
+# the video-frame rasteriser lives in geometry (retarget's previews may not import report); the
+# report renderer re-exports it beside its matplotlib drawing
+from ..geometry.raster import LIGHT, SKIN_RGB, rasterize_mesh  # noqa: E402,F401

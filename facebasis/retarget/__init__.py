@@ -23,6 +23,7 @@ observe    which shapes the landmarks can tell apart (:func:`identifiability`)
 calibrate  the person's neutral landmarks estimated from the capture (identity "auto")
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
+preview    preview.mp4 (the source beside the rig or mesh rendered per frame) and weights.png
 
 Captures are read with :func:`facebasis.capture.trackfile.read_capture` (the stated interface
 between the two halves of the method).

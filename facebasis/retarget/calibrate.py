@@ -40,11 +40,11 @@ approximate away from them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .pose import PI
+from .pose import PI, fit_pose_affine, fit_pose_gn
 
 #: pilot frames (evenly spaced) of the calibration
 CALIBRATION_FRAMES = 40
@@ -86,6 +86,8 @@ class IdentityCalibration:
         the landmark noise of the "auto" ridge, :meth:`.rigdrive.RigRetargeter.estimate_noise`)
     applied : False when the offset lowered the pilot residual by less than :data:`MIN_GAIN` (then
         nothing is applied: offset and baseline are 0 and rms_after, noise those of the rig's neutral)
+    rest_applied, quantile_applied : ``identity="auto"``: which of its two steps was kept (the rest
+        face, :func:`calibrate_rest`; the quantile baseline on top of it, :func:`calibrate_identity`)
     """
 
     offset: np.ndarray
@@ -95,6 +97,8 @@ class IdentityCalibration:
     rms_after: float
     noise: float = float("nan")
     applied: bool = False
+    rest_applied: bool = False
+    quantile_applied: bool = False
 
 
 def pilot_frames(visible, n: int = CALIBRATION_FRAMES) -> np.ndarray:
@@ -130,7 +134,6 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
     -------
     IdentityCalibration
     """
-    from .rigdrive import RIDGE_FLOOR
 
     P = np.asarray(landmarks, np.float64)
     vis = np.asarray(visible, bool)
@@ -145,19 +148,19 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
     # (an orthonormal basis of their span from the SVD: the motion is rank-deficient when landmarks
     # cannot tell shapes apart, and QR would add arbitrary directions outside the span)
     Q = span_basis(solver.D[:, :2].reshape(2 * L, k))
-    keep = solver.smooth, solver.ridge
-    solver.smooth, solver.ridge = 0.0, RIDGE_FLOOR
+    # plain least squares in the pilot fits (no sparsity, no contour sliding): the offset must
+    # explain every landmark coordinate, the jaw line's along-contour position included
     states = [None] * F
     rms_first = rms = noise = noise_first = float("nan")
-    try:
+    with solver.pilot_settings():
         for rnd in range(rounds + 1):
             out = [solver.solve_frame(P[f], vis[f], states[j]) for j, f in enumerate(frames)]
-            states = [o[:4] for o in out]
-            X = np.array([o[0] for o in out])
-            S = np.array([o[1] for o in out])
-            Rs = np.array([o[2] for o in out])
-            Ts = np.array([o[3] for o in out])
-            res = np.array([o[4] for o in out])
+            states = [o.state for o in out]
+            X = np.array([o.x for o in out])
+            S = np.array([o.s for o in out])
+            Rs = np.array([o.R for o in out])
+            Ts = np.array([o.t for o in out])
+            res = np.array([o.rms for o in out])
             rms = float(np.nanmedian(res))
             noise = float(np.nanmedian(res / S))
             if rnd == 0:
@@ -180,13 +183,133 @@ def calibrate_identity(solver, landmarks, visible, n_frames: int = CALIBRATION_F
             solver.v0 = solver.v0 + delta
             baseline += c
             states = [(np.clip(x - c, 0.0, 1.0), s, R, t) for (x, s, R, t) in states]   # warm start
-    finally:
-        solver.smooth, solver.ridge = keep
     if not rms <= (1.0 - MIN_GAIN) * rms_first:     # nothing static to explain (e.g. the rig's own face)
         solver.v0 = v_start
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, rms_first, rms_first, noise_first, False)
     return IdentityCalibration(solver.v0 - v_start, baseline, frames, rms_first, rms, noise, True)
 
 
-__all__ = ["IdentityCalibration", "calibrate_identity", "pilot_frames", "back_project", "CALIBRATION_FRAMES",
+#: share of the pilot frames that forms the capture's densest cluster of faces (the rest face)
+REST_SHARE = 0.25
+#: the rest offset is kept only if it lowers the median residual of the full pilot fits by this
+#: fraction: an offset that is an expression (a capture with no rest, e.g. the synthetic benchmark's
+#: rig face with 11 shapes each on half the time) makes those fits worse (measured 0.63 -> 0.71 px)
+#: and is dropped; another person's face lowers it (ICT identities 1-3: 4-17%; the real clips 30-40%)
+REST_MIN_GAIN = 0.02
+#: pilot frames of the rest calibration (evenly spaced)
+REST_FRAMES = 100
+
+
+def rest_offsets(solver, landmarks, visible, frames, poses=None):
+    """Per pilot frame, the in-plane offset of every landmark from ``solver.v0`` with all weights 0.
+
+    Each frame's pose is fitted to ``v0`` alone (the contour landmarks measured across the contour,
+    :func:`.pose.contour_weights`) and its image residual carried back into the rig frame,
+    ``R^T Pi^T r / s`` (no depth). Returns (offsets (F, L, 3) with NaN for lost landmarks, poses,
+    rms residuals (F,) px)."""
+    from .pose import contour_weights
+
+    P, vis = landmarks, visible
+    L = solver.v0.shape[0]
+    out, new_poses, rms = np.full((len(frames), L, 3), np.nan), [], np.zeros(len(frames))
+    for j, f in enumerate(frames):
+        v = vis[f]
+        W = contour_weights(P[f], solver.contour, solver.contour_slide)
+        W = None if W is None else W[v]
+        s, R, t = fit_pose_affine(solver.v0[v], P[f][v]) if poses is None else poses[j]
+        s, R, t, rms[j] = fit_pose_gn(solver.v0[v], P[f][v], s, R, t, iterations=4, sqrtw=W)
+        new_poses.append((s, R, t))
+        o = ((P[f] - (s * (solver.v0 @ R.T @ PI.T) + t)) @ PI @ R) / s
+        out[j, v] = o[v]
+    return out, new_poses, rms
+
+
+def densest_frames(offsets, share: float = REST_SHARE) -> np.ndarray:
+    """Indices of the densest ``share`` of the frames: the frame whose ``K = share F`` nearest
+    neighbours (rms landmark distance of the offsets (F, L, 3)) are closest, and those neighbours."""
+    Z = np.nan_to_num(offsets[:, :, :2].reshape(len(offsets), -1))
+    d = np.sqrt(np.maximum(((Z[:, None] - Z[None]) ** 2).mean(2), 0.0))     # (F, F), F <= REST_FRAMES
+    K = min(len(Z), max(3, int(round(share * len(Z)))))
+    near = np.argsort(d, axis=1, kind="stable")[:, :K]
+    return near[np.argmin(np.take_along_axis(d, near, 1).mean(1))]
+
+
+def _fitted_rms(solver, landmarks, visible, frames) -> float:
+    """Median over the frames of the rms landmark residual (px) of the full fit (pose and weights,
+    :meth:`.rigdrive.RigRetargeter.pilot_settings` with the contour sliding) with the current ``v0``."""
+    with solver.pilot_settings(plain=False):           # the contour slides, as in the frames' solve
+        res = [solver.solve_frame(landmarks[f], visible[f], None).rms for f in frames]
+    return float(np.nanmedian(res))
+
+
+def calibrate_rest(solver, landmarks, visible, n_frames: int = REST_FRAMES, rounds: int = CALIBRATION_ROUNDS,
+                   share: float = REST_SHARE) -> IdentityCalibration:
+    """The person's rest face: the densest cluster of the capture's pose-normalised faces.
+
+    A face at rest is where a capture spends most of its time, and comes back to between
+    expressions; expressions are excursions from it in many directions. Up to ``n_frames`` evenly
+    spaced pilot frames are posed on ``solver.v0`` with all weights 0 (:func:`rest_offsets`), their
+    landmark offsets from it compared, and the landmark-wise median of the densest ``share`` of them
+    (:func:`densest_frames`) is added to ``v0`` (in-plane, no depth); ``rounds`` times, each round
+    posing on the updated neutral. Unlike the quantile baseline (:func:`calibrate_identity`), this
+    needs no weights of the pilot frames, so landmark noise fitted by weak shapes cannot leak into
+    the neutral, and the offset is not restricted to the shapes' span.
+
+    It is kept only if it lowers the median residual of the full pilot fits (pose and weights) by
+    :data:`REST_MIN_GAIN` or more: on a capture of the rig's own face the shapes already fit every
+    frame and the rig's neutral stays (the weights are then exactly those of ``identity="rig"``).
+
+    Returns
+    -------
+    IdentityCalibration (``baseline`` zeros; ``rms_before`` / ``rms_after`` the full pilot fits' median
+    residuals, px, with the rig's and the calibrated neutral)
+    """
+    P = np.asarray(landmarks, np.float64)
+    vis = np.asarray(visible, bool)
+    frames = pilot_frames(vis, n_frames)
+    L, k = solver.v0.shape[0], solver.D.shape[2]
+    v_start = solver.v0.copy()
+    if len(frames) == 0:
+        return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, float("nan"), float("nan"))
+    check = frames[np.unique(np.linspace(0, len(frames) - 1, min(len(frames), CALIBRATION_FRAMES)).round().astype(int))]
+    before = _fitted_rms(solver, P, vis, check)
+    poses = None
+    for _ in range(rounds):
+        O, poses, _ = rest_offsets(solver, P, vis, frames, poses)
+        off = np.nan_to_num(np.nanmedian(O[densest_frames(O, share)], axis=0))
+        off[:, 2] = 0.0
+        solver.v0 = solver.v0 + off
+    after = _fitted_rms(solver, P, vis, check)
+    if not after <= (1.0 - REST_MIN_GAIN) * before:
+        solver.v0 = v_start
+        return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, before, before, float("nan"), False)
+    return IdentityCalibration(solver.v0 - v_start, np.zeros(k), frames, before, after, float("nan"), True)
+
+
+def calibrate_auto(solver, landmarks, visible) -> IdentityCalibration:
+    """``identity="auto"``: the quantile baseline (:func:`calibrate_identity`) on the rig's neutral,
+    and on the rest face (:func:`calibrate_rest`); the one whose full pilot fits (pose and weights,
+    the same pilot frames) leave the lower median residual is kept in ``solver.v0``.
+
+    The rest face assumes the capture comes back to a face at rest; a capture that never does (every
+    frame some expression) moves it into an expression, after which frames need negative weights and
+    fit worse than with the quantile baseline alone, which is then kept.
+    """
+    v_start = solver.v0.copy()
+    quant = calibrate_identity(solver, landmarks, visible)
+    v_quant = solver.v0.copy()
+    solver.v0 = v_start.copy()
+    rest = calibrate_rest(solver, landmarks, visible)
+    if not rest.applied:
+        solver.v0 = v_quant
+        return replace(quant, quantile_applied=quant.applied)
+    both = calibrate_identity(solver, landmarks, visible)         # the baseline on top of the rest face
+    if not both.rms_after < quant.rms_after:
+        solver.v0 = v_quant
+        return replace(quant, quantile_applied=quant.applied)
+    return IdentityCalibration(solver.v0 - v_start, both.baseline, both.frames, quant.rms_before, both.rms_after,
+                               both.noise, True, True, both.applied)
+
+
+__all__ = ["IdentityCalibration", "calibrate_auto", "calibrate_identity", "calibrate_rest", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES", "pilot_frames", "back_project", "CALIBRATION_FRAMES",
            "CALIBRATION_ROUNDS", "BASELINE_QUANTILE", "MIN_GAIN", "OUTLIER"]

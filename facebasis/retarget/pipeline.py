@@ -123,15 +123,41 @@ def _default_face_mesh():
     return rig.neutral, rig.faces, face_landmarks()
 
 
+def _mesh_or_rig_neutral(mesh, neutral: str = "neutral.obj", exclude=(), log=None):
+    """(V, F) of ``--mesh``: a mesh file, or a rig folder's neutral (``--neutral``, ``--exclude`` as
+    ``transfer``'s; the folder's warning, :func:`facebasis.geometry.rig.rig_folder_warning`)."""
+    from pathlib import Path
+
+    from ..geometry.meshio import read_mesh
+    from ..geometry.rig import load_rig_folder, rig_folder_warning
+
+    exclude = tuple(exclude or ())
+    if mesh is not None and Path(mesh).is_dir():
+        rig = load_rig_folder(mesh, neutral, exclude)
+        warning = rig_folder_warning(rig)
+        if warning:
+            _log(log, warning)
+        return rig.neutral, rig.faces
+    given = ([f"--exclude {' '.join(exclude)}"] if exclude else []) + \
+        ([f"--neutral {neutral}"] if neutral != "neutral.obj" else [])
+    if given:
+        raise InputError(f"{', '.join(given)}: expected a rig folder as --mesh, found "
+                         f"{'the built-in face' if mesh is None else f'the mesh file {mesh}'}")
+    return read_mesh(mesh) if mesh is not None else None
+
+
 def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "still", log=None,
-                  unit: str = "cm") -> dict:
+                  unit: str = "cm", neutral: str = "neutral.obj", exclude=(), preview: bool = True) -> dict:
     """Drive a mesh (default: the built-in face) by a capture; writes ``frames.npz`` (vertices
     (T, n, 3), faces), ``animation.glb`` (morph targets over a PCA basis of the motion,
     :func:`.animation.compact_vertex_animation`, in metres from the mesh's ``unit``, with an OBJ
-    mesh's UVs and materials) and ``summary.json``. ``head``: "still" (expression only) or
-    "follow" (the whole mesh moves with the head)."""
+    mesh's UVs and materials), ``preview.mp4`` (unless ``preview`` is False: the source video beside
+    the driven mesh, :mod:`.preview`) and ``summary.json``. ``head``: "still" (expression only) or
+    "follow" (the whole mesh moves with the head). ``mesh`` may be a rig folder: its neutral
+    (``neutral``, files matching an ``exclude`` glob left out) is driven."""
+    from pathlib import Path
+
     from ..geometry.gltf import unit_scale
-    from ..geometry.meshio import read_mesh
     from ..geometry.objlayout import read_obj_layout
     from .animation import frame_times, vertex_animation_glb_bytes
     from .drive3d import MeshDriver
@@ -143,6 +169,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "
     unit_scale(unit)                                  # a bad --unit: said before any work
     cap = read_capture(capture_dir)
     layout = None
+    mesh_vf = _mesh_or_rig_neutral(mesh, neutral, exclude, log)
     if mesh is None:
         V, F, idx = _default_face_mesh()
         if landmarks is not None:
@@ -152,8 +179,8 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "
         if landmarks is None:
             raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
                              f"found none")
-        V, F = read_mesh(mesh)
-        layout = read_obj_layout(mesh)
+        V, F = mesh_vf
+        layout = read_obj_layout(Path(mesh) / neutral if Path(mesh).is_dir() else mesh)
         idx = read_indices(landmarks)
         name = str(mesh)
     idx = check_landmark_indices(idx, len(V), cap.n_landmarks,
@@ -177,6 +204,9 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "
                    "animation_error_bound": motion.tolerance, "animation_basis": motion.rank,
                    "seconds": time.perf_counter() - t0,
                    "z": "unchanged (monocular capture: in-plane motion only)"}
+        if preview:
+            summary.update(_write_previews(stage, capture_dir, cap, V, F, None, None, lambda f: anim.vertices[f],
+                                           None, log, focus=idx))
         atomic_write_json(stage / "summary.json", summary)
     return summary
 
@@ -184,13 +214,22 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "
 # ----------------------------------------------------------------------------------------------
 # rig
 
-def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_landmarks: int | None = None):
-    """(rig, landmark indices, default exclusive pairs) for ``--rig`` (None/"default": built-in face)."""
-    from ..geometry.rig import load_rig_folder
+def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_landmarks: int | None = None,
+                      exclude=(), log=None):
+    """(rig, landmark indices, default exclusive pairs) for ``--rig`` (None/"default": built-in face).
+
+    ``exclude``: globs of rig-folder files to leave out (``--exclude``, as ``transfer``'s); a folder
+    whose shapes look like identity modes or are many gets a one-line warning through ``log``
+    (:func:`facebasis.geometry.rig.rig_folder_warning`)."""
+    from ..geometry.rig import load_rig_folder, rig_folder_warning
     from .files import read_indices
     from .rigdrive import check_landmark_indices
 
+    exclude = tuple(exclude or ())
     if rig is None or str(rig) == "default":
+        if exclude:
+            raise InputError(f"--exclude: expected a rig folder (--rig RIG_DIR) to leave files out of, found the "
+                             f"built-in face (--exclude {' '.join(exclude)})")
         from ..defaults.face import EXCLUSIVE_PAIRS, default_template
         from ..defaults.face_landmarks import face_landmarks
 
@@ -200,9 +239,12 @@ def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_
     else:
         if landmarks is None:
             raise InputError(f"--landmarks: expected a JSON file of vertex indices of rig {rig}, found none")
-        r = load_rig_folder(rig, neutral)
+        r = load_rig_folder(rig, neutral, exclude)
         idx = read_indices(landmarks)
         default_pairs = ()
+        warning = rig_folder_warning(r)
+        if warning:
+            _log(log, warning)
     n = len(idx) if n_landmarks is None else n_landmarks
     idx = check_landmark_indices(idx, r.n_vertices, n,
                                  f"landmark index file {landmarks}" if landmarks else "built-in face landmarks")
@@ -277,7 +319,8 @@ FIRST_FRAME_HINT = 0.03
 
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
-                 identity: str | None = None, log=None, animate_pose: bool = True, unit: str = "cm") -> dict:
+                 identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
+                 unit: str = "cm") -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
@@ -286,23 +329,27 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
     (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
+    ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    (the source video beside the rig rendered with the solved weights and head rotation) and
+    ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
     from ..rigging.examples import parse_pairs
     from ..geometry.gltf import unit_scale
+    from .preview import rig_frames
     from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
     unit_scale(unit)                                  # a bad --unit: said before any work
     ridge = _parse_ridge(ridge)
-    if identity is not None and not isinstance(identity, str):
-        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
-    if isinstance(identity, str) and identity not in ("auto", "first-frame", "rig"):
-        raise InputError(f"--identity: expected one of auto, first-frame, rig, found {identity!r}")
+    from .rigdrive import IDENTITY_MODES
+
+    if identity is not None and (not isinstance(identity, str) or identity not in IDENTITY_MODES):
+        raise InputError(f"--identity: expected one of {', '.join(IDENTITY_MODES)}, found {identity!r}")
     try:
         identity = resolve_identity(identity, first_frame_neutral)
     except InputError as exc:
         raise InputError(f"--identity and --first-frame-neutral: {str(exc).split(': ', 1)[1]}") from None
     cap = read_capture(capture_dir)
-    r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks)
+    r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks, exclude, log)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
@@ -319,9 +366,12 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))
         extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
                       "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
+        steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}, quantile baseline "
+                 f"{'kept' if cal.quantile_applied else 'not kept'}" if identity == "auto" else "")
+        extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied)})
         _log(log, f"identity: static landmark offset estimated on {len(cal.frames)} pilot frames "
-                  f"({moved:.3g} rig units rms); pilot residual {cal.rms_before:.2f} px with the rig's neutral, "
-                  f"{cal.rms_after:.2f} px calibrated")
+                  f"({moved:.3g} rig units rms){steps}; pilot residual {cal.rms_before:.2f} px with the rig's "
+                  f"neutral, {cal.rms_after:.2f} px calibrated")
     if ridge == "auto":
         v0 = r.neutral[idx]
         radius = float(np.sqrt(np.mean(np.sum((v0 - v0.mean(0)) ** 2, axis=1))))
@@ -335,8 +385,28 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                       "rig's, or its landmarks are defined differently); --identity auto (the default) estimates "
                       "the person's neutral from the capture, --identity first-frame takes frame 0 as it")
     with atomic_directory(out_dir) as stage:
+        if preview:
+            extra.update(_write_previews(stage, capture_dir, cap, r.neutral, r.faces, r.names, result.weights,
+                                         rig_frames(r, result.weights), result.rotation, log, focus=idx))
         summary = write_retarget_outputs(stage, r, result, named, extra, animate_pose=animate_pose, unit=unit)
     return summary
+
+
+def _write_previews(stage, capture_dir, cap, rest, faces, names, weights, frame_vertices, rotation, log,
+                    focus=None) -> dict:
+    """``preview.mp4`` (+ ``weights.png`` when there are weights) into ``stage``; summary entries."""
+    from .preview import plot_weights, source_video, write_preview
+
+    video = source_video(capture_dir, cap)
+    st = write_preview(stage / "preview.mp4", rest, faces, frame_vertices, cap.n_frames, cap.fps, rotation, video,
+                       focus=focus)
+    out = {"preview_frames": st.frames, "preview_size": [st.width, st.height], "preview_ms_per_frame": st.ms_per_frame,
+           "preview_source": st.source}
+    if weights is not None:
+        out["weights_plot_shapes"] = plot_weights(stage / "weights.png", list(names), weights, cap.fps)
+    _log(log, f"preview: {st.frames} frames {st.width}x{st.height}"
+              + (f" beside {video}" if video is not None else "") + f", {st.ms_per_frame:.1f} ms per frame")
+    return out
 
 
 __all__ = ["run_animate2d", "run_animate3d", "run_retarget", "load_retarget_rig", "write_retarget_outputs",

@@ -63,15 +63,28 @@ def fit_pose_affine(q, p) -> tuple[float, np.ndarray, np.ndarray]:
     return s, R, t
 
 
-def fit_pose_gn(q, p, s, R, t, iterations: int = 4) -> tuple[float, np.ndarray, np.ndarray, float]:
+def whiten(M, sqrtw):
+    """Apply per-landmark 2 x 2 weights ``sqrtw`` (L, 2, 2) to a stacked (2L,) or (2L, m) array
+    (None: unchanged)."""
+    if sqrtw is None:
+        return M
+    M = np.asarray(M)
+    L = len(sqrtw)
+    if M.ndim == 1:
+        return np.einsum("lij,lj->li", sqrtw, M.reshape(L, 2)).reshape(-1)
+    return np.einsum("lij,ljm->lim", sqrtw, M.reshape(L, 2, -1)).reshape(2 * L, -1)
+
+
+def fit_pose_gn(q, p, s, R, t, iterations: int = 4, sqrtw=None) -> tuple[float, np.ndarray, np.ndarray, float]:
     """Gauss-Newton on (log s, rotation increment w (R <- exp(w) R), t) for ``s Pi R q + t ~= p``.
 
-    q : (L, 3); p : (L, 2). Returns (s, R, t, rms residual in pixels).
+    q : (L, 3); p : (L, 2); sqrtw : optional (L, 2, 2) per-landmark square-root weights of the
+    residual (:func:`contour_weights`). Returns (s, R, t, rms residual in pixels, unweighted).
     """
     for _ in range(iterations):
         u = q @ R.T                                      # (L, 3) rotated points
-        r = (s * (u @ PI.T) + t - p).reshape(-1)         # (2L,)
-        J = pose_jacobian(u) * np.array([s, s, s, s, 1.0, 1.0])
+        r = whiten((s * (u @ PI.T) + t - p).reshape(-1), sqrtw)         # (2L,)
+        J = whiten(pose_jacobian(u) * np.array([s, s, s, s, 1.0, 1.0]), sqrtw)
         H = J.T @ J
         H[np.diag_indices(6)] *= 1.0 + 1e-9
         step = -np.linalg.solve(H + 1e-12 * np.eye(6), J.T @ r)
@@ -99,8 +112,31 @@ def pose_jacobian(u) -> np.ndarray:
 
 
 
+def contour_weights(p, contour, slide: float, n_landmarks: int | None = None) -> np.ndarray | None:
+    """Per-landmark square-root weights (L, 2, 2) that let contour landmarks slide along the contour.
+
+    A silhouette landmark (the jaw line of the 68-point iBUG set, points 0-16) marks where the
+    face's outline is, not a fixed point of the face: as the head turns it slides along the outline,
+    and a detector places it along the outline with much larger error than across it. Its residual
+    is therefore measured across the contour in full and along it with weight ``slide``
+    (``W_l = n n^T + slide t t^T``, t the unit tangent from the neighbouring contour landmarks of
+    the observation ``p`` (L, 2), n the normal); other landmarks keep the identity. ``slide`` 1 or
+    an empty ``contour``: None (plain least squares).
+    """
+    idx = np.asarray(contour, np.int64)
+    if len(idx) < 3 or slide >= 1.0:
+        return None
+    L = len(p) if n_landmarks is None else n_landmarks
+    c = np.asarray(p, np.float64)[idx]
+    tan = np.gradient(c, axis=0)                         # central differences, one-sided at the ends
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True) + 1e-300
+    W = np.tile(np.eye(2), (L, 1, 1))
+    W[idx] = (np.eye(2)[None] - tan[:, :, None] * tan[:, None, :]) + np.sqrt(slide) * tan[:, :, None] * tan[:, None, :]
+    return W
+
+
 #: former private name (kept for callers of the old module)
 _pose_jacobian = pose_jacobian
 
-__all__ = ["PI", "rotation_from_vector", "rotation_to_vector", "project_landmarks", "fit_pose_affine", "fit_pose_gn",
+__all__ = ["PI", "whiten", "contour_weights", "rotation_from_vector", "rotation_to_vector", "project_landmarks", "fit_pose_affine", "fit_pose_gn",
            "pose_jacobian"]

@@ -15,8 +15,15 @@ previous frame, pose and weights are alternated:
   projection), so one round per warm-started frame is enough (about 12 rounds without it);
 * x | pose: the package's weight model (seed 000, eq. 5, with the data term of the model above)
 
-      min_x  (1/s^2) || A x - b ||^2 + mu || x - x_prev ||^2 + rho || x ||^2
+      min_x  (1/s^2) || W (A x - b) ||^2 + mu || x - x_prev ||^2 + rho || x ||^2 + sparsity rho sum_i x_i
       s.t.   0 <= x <= 1,   x_a x_b = 0 for exclusive pairs (a, b),
+
+  W the per-landmark weights of the noise model (identity, except on a contour: the jaw line of a
+  68-point capture, whose residual along the contour counts ``contour_slide`` = 0.05, see
+  :func:`.pose.contour_weights`; the pose step uses the same W), and the linear term the
+  exponential (sparse) part of the weight prior (default ``sparsity`` 3: with the Gaussian part it
+  is a Gaussian of standard deviation 0.5 centred at -1.5, truncated to [0, 1]: a weight stays at 0
+  unless the landmarks push it; measured in reports/retarget/plausibility.md);
 
   the data term measured in rig units (divided by s^2), mu the temporal smoothness (default 0.05),
   rho the ridge that keeps shapes the landmarks cannot see, or cannot tell from noise, at zero. Since
@@ -42,8 +49,10 @@ noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 p
 weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
 
 Identity (``identity``): the rig's neutral landmarks are not the filmed person's. ``"auto"`` (the
-default) estimates a static landmark offset from the capture (:mod:`.calibrate`): the baseline of
-shapes that stay on through nearly all of it plus the median in-plane residual; ``"first-frame"``
+default) estimates a static landmark offset from the capture (:func:`.calibrate.calibrate_auto`):
+the rest face (median of the densest quarter of the pilot faces) and on top of it the baseline of
+shapes that stay on through nearly all of it plus the median in-plane residual, or that second
+step alone (``"quantile"``, the default before issue 23), whichever fits the pilot frames better; ``"first-frame"``
 takes frame 0 as the neutral (wrong when the capture starts on an expression; the former
 ``first_frame_neutral=True``); ``"rig"`` uses the rig's neutral as it is.
 """
@@ -51,16 +60,19 @@ takes frame 0 as the neutral (wrong when the capture starts on an expression; th
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
 from ..geometry.rig import Rig
-from .calibrate import IdentityCalibration, calibrate_identity
+from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .pose import (
     PI,
+    contour_weights,
+    whiten,
     fit_pose_affine,
     fit_pose_gn,
     pose_jacobian,
@@ -80,7 +92,14 @@ PRIOR_STD = 0.5
 #: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
 PILOT_FRAMES = 40
 #: how the person's neutral landmarks are obtained (see the module docstring and :mod:`.calibrate`)
-IDENTITY_MODES = ("auto", "first-frame", "rig")
+IDENTITY_MODES = ("auto", "first-frame", "rig", "quantile")
+#: weight of a contour landmark's residual along the contour, relative to across it (see
+#: :func:`.pose.contour_weights`): the jaw line of a 68-point capture slides along the face's outline
+CONTOUR_SLIDE = 0.05
+#: the 68-point iBUG jaw line (points 0-16), the contour of ``contour="auto"`` when L is 68
+IBUG_CONTOUR = tuple(range(17))
+#: sparsity of the weight prior: the linear term ``sparsity * rho * sum_i x_i`` (see the module docstring)
+DEFAULT_SPARSITY = 3.0
 #: default identity mode (measured in reports/reproduction/real_clips_notes.md and reports/retarget)
 DEFAULT_IDENTITY = "auto"
 
@@ -158,6 +177,29 @@ class RetargetResult:
         return np.stack([rotation_to_vector(R) for R in self.rotation])
 
 
+@dataclass(frozen=True)
+class FrameFit:
+    """One frame's fit (:meth:`RigRetargeter.solve_frame`): weights x (k,), scale s (px per rig
+    unit), rotation R (3, 3), translation t (2,) px, rms landmark residual px (visible landmarks;
+    nan when too few were visible), branch-and-bound nodes. Unpacks as the former 6-tuple
+    ``x, s, R, t, rms, nodes``."""
+
+    x: np.ndarray
+    s: float
+    R: np.ndarray
+    t: np.ndarray
+    rms: float
+    nodes: int
+
+    @property
+    def state(self) -> tuple:
+        """(x, s, R, t): the warm start of the next frame."""
+        return self.x, self.s, self.R, self.t
+
+    def __iter__(self):
+        return iter((self.x, self.s, self.R, self.t, self.rms, self.nodes))
+
+
 def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
     """(L,) int64 vertex indices; :class:`InputError` if the count is not the capture's L, an index
     is out of range or one vertex is given twice (two landmarks pinned to one vertex)."""
@@ -218,11 +260,19 @@ class RigRetargeter:
         from showing up as expression (see :meth:`run`)
     first_frame_neutral : older spelling: True is ``identity="first-frame"``, False ``"rig"``
     solver : "certified" (branch and bound, default) or "ipopt" (CasADi/IPOPT polished by it)
+    contour : landmark indices of a silhouette contour whose points may slide along it; "auto" (the
+        default): the iBUG jaw line 0-16 when there are 68 landmarks, else none
+    contour_slide : weight of a contour landmark's residual along the contour (:data:`CONTOUR_SLIDE`;
+        1 measures it as every other landmark), see :func:`.pose.contour_weights`
+    sparsity : the exponential part of the weight prior, ``sparsity * rho * sum_i x_i``
+        (:data:`DEFAULT_SPARSITY`; 0 leaves the Gaussian ridge alone)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
-                 first_frame_neutral: bool | None = None, identity: str | None = None):
+                 first_frame_neutral: bool | None = None, identity: str | None = None,
+                 contour="auto", contour_slide: float = CONTOUR_SLIDE,
+                 sparsity: float = DEFAULT_SPARSITY):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -249,6 +299,19 @@ class RigRetargeter:
         self.calibration: IdentityCalibration | None = None      # set by run() with identity "auto"
         self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() unless identity "rig"
         self.D = np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0))   # (L, 3, k)
+        L = len(self.indices)
+        if isinstance(contour, str):
+            if contour != "auto":
+                raise InputError(f"contour: expected 'auto' or landmark indices, found {contour!r}")
+            contour = IBUG_CONTOUR if L == 68 else ()
+        self.contour = np.asarray(contour, np.int64).reshape(-1)
+        if len(self.contour) and (self.contour.min() < 0 or self.contour.max() >= L):
+            raise InputError(f"contour: expected landmark indices in [0, {L}), found {self.contour.tolist()}")
+        for name, v in (("contour_slide", contour_slide), ("sparsity", sparsity)):
+            if not np.isfinite(v) or v < 0:
+                raise InputError(f"{name}: expected a finite number >= 0, found {v}")
+        self.contour_slide = float(contour_slide)
+        self.sparsity = float(sparsity)
         self._ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -263,20 +326,23 @@ class RigRetargeter:
         """Rig landmark positions (L, 3) at weights x (k,)."""
         return self.v0 + self.D @ x
 
-    def _weights(self, p, vis, s, R, t, x_prev, x_cur):
+    def _weights(self, p, vis, s, R, t, x_prev, x_cur, sqrtw=None):
         """x | pose: the certified weight solve (eq. 5 form) of one frame."""
         from ..rigging.certify import CertifiedWeightSolver
         from ..rigging.weightproblem import WeightProblem
 
-        E = np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes)   # (2Lv, k)
-        b = (((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1)                      # rig units
+        E = whiten(np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes), sqrtw)  # (2Lv, k)
+        b = whiten((((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1), sqrtw)                # rig units
         # variable projection: the pose may still move along its 6 linearised directions (at the
         # current landmarks), so the weights see the data with those directions projected out
-        Qp, _ = np.linalg.qr(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T))
+        Qp, _ = np.linalg.qr(whiten(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T), sqrtw))
         E = E - Qp @ (Qp.T @ E)
         b = b - Qp @ (Qp.T @ b)
         G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
         c = E.T @ b
+        lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see the module docstring
+        if lin > 1e-6 * np.trace(G) / len(G):     # smaller moves no weight by 1e-6 (and makes DAQP cycle on
+            c = c - 0.5 * lin                     # near-singular problems such as ridge 1e-9 on exact data)
         lam = self.smooth + self.ridge
         prior = (self.smooth / lam) * x_prev            # mu||x - x_prev||^2 + rho||x||^2, completed square
         problem = WeightProblem(G, c[None], np.array([b @ b]), self.pairs, prior[None], lam)   # eq. 5, one frame
@@ -286,10 +352,26 @@ class RigRetargeter:
         sol = CertifiedWeightSolver(problem).solve_example(0, start=x_cur)
         return sol.x, sol.nodes
 
-    def solve_frame(self, p, visible=None, state=None):
+    @contextmanager
+    def pilot_settings(self, plain: bool = True):
+        """Within the block, frames are fitted as the pilot fits are: on their own (no temporal
+        term), ridge :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as
+        fixed points (plain least squares: what the neutral or the noise estimate must explain;
+        ``plain=False`` keeps the contour's sliding, to compare fits as the frames will be
+        solved); restored after."""
+        keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
+        self.smooth, self.ridge, self.sparsity = 0.0, RIDGE_FLOOR, 0.0
+        if plain:
+            self.contour_slide = 1.0
+        try:
+            yield self
+        finally:
+            self.smooth, self.ridge, self.sparsity, self.contour_slide = keep
+
+    def solve_frame(self, p, visible=None, state=None) -> FrameFit:
         """One frame: landmarks p (L, 2), visible (L,) bool, state = previous (x, s, R, t) or None.
 
-        Returns (x (k,), s, R, t, rms residual px, nodes).
+        Returns a :class:`FrameFit` (unpacks as ``x, s, R, t, rms, nodes``).
         """
         p = np.asarray(p, np.float64)
         vis = np.ones(len(p), bool) if visible is None else np.asarray(visible, bool)
@@ -299,7 +381,7 @@ class RigRetargeter:
                 raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
                                  f"found {int(vis.sum())}")
             x, s, R, t = state
-            return x.copy(), s, R.copy(), t.copy(), float("nan"), 0
+            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
         if state is None:
             x_prev = np.zeros(k)
             s, R, t = fit_pose_affine(self.v0[vis], p[vis])
@@ -307,15 +389,17 @@ class RigRetargeter:
         else:
             x_prev, s, R, t = state
             n_alt = self.alternations
+        W = contour_weights(p, self.contour, self.contour_slide)
+        W = None if W is None else W[vis]
         x, nodes = x_prev.copy(), 0
         for _ in range(n_alt):
-            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3)
+            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
             x_old = x
-            x, nodes = self._weights(p, vis, s, R, t, x_prev, x)
+            x, nodes = self._weights(p, vis, s, R, t, x_prev, x, W)
             if np.abs(x - x_old).max() <= self.tol:
                 break
-        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3)
-        return x, s, R, t, rms, nodes
+        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
+        return FrameFit(x, float(s), R, t, float(rms), int(nodes))
 
     def _adopt_first_frame(self, p, vis):
         """Shift the rig's landmarks so that the neutral, posed on frame 0, matches it exactly.
@@ -344,18 +428,14 @@ class RigRetargeter:
         """
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
-        keep = self.smooth, self.ridge
-        self.smooth, self.ridge = 0.0, RIDGE_FLOOR
         out = []
-        try:
+        with self.pilot_settings():
             for f in frames:
                 if visible[f].sum() < 4:
                     continue
-                _, s, _, _, rms, _ = self.solve_frame(landmarks[f], visible[f], None)
-                if np.isfinite(rms) and s > 0:
-                    out.append(rms / s)
-        finally:
-            self.smooth, self.ridge = keep
+                fit = self.solve_frame(landmarks[f], visible[f], None)
+                if np.isfinite(fit.rms) and fit.s > 0:
+                    out.append(fit.rms / fit.s)
         return float(np.median(out)) if out else float("nan")
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -376,6 +456,8 @@ class RigRetargeter:
         if self.identity == "first-frame":
             self._adopt_first_frame(np.nan_to_num(P[0]), vis[0])
         elif self.identity == "auto":
+            self.calibration = calibrate_auto(self, np.nan_to_num(P), vis)
+        elif self.identity == "quantile":
             self.calibration = calibrate_identity(self, np.nan_to_num(P), vis)
         if self.auto:
             if self.calibration is not None and np.isfinite(self.calibration.noise):
@@ -403,7 +485,7 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
     return RigRetargeter(rig, idx, pairs, smooth, ridge, **kw).run(landmarks, lost, fps)
 
 
-__all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
+__all__ = ["RigRetargeter", "RetargetResult", "FrameFit", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
            "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
            "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
            "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES", "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]

@@ -477,3 +477,17 @@ def test_animate3d_unit_and_mesh_layout(tmp_path, capsys):
     capsys.readouterr()
     assert _main(base + ["--out", str(tmp_path / "b"), "--unit", "km"]) == 2
     assert "--unit: expected one of m, cm, mm" in capsys.readouterr().err and not (tmp_path / "b").exists()
+
+
+def test_transfer_warns_about_a_folder_as_it_ships(facex, tmp_path, capsys):
+    """#23 item 5: `transfer` without --exclude 'identity*' wrote ICT's identity modes as expressions
+    without a word; now one line names them and the option (and --exclude silences it)."""
+    folder, _, _, _ = facex
+    target = folder.parent / "target.obj"
+    base = ["transfer", "--template", str(folder), "--neutral", "generic_neutral_mesh.obj", "--target", str(target)]
+    assert _main(base + ["--out", str(tmp_path / "all")]) == 0
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if line.startswith("warning: rig folder")]
+    assert len(warned) == 1 and "look like identity modes" in warned[0] and "--exclude 'identity*'" in warned[0]
+    assert _main(base + ["--exclude", "identity*", "--out", str(tmp_path / "some")]) == 0
+    assert "identity modes" not in capsys.readouterr().err

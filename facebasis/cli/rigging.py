@@ -20,6 +20,7 @@ def cmd_transfer(args) -> int:
     _check_contact_flags(args)
     check_virtual_edge_args(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
+    _warn_rig_folder(template)
     target = load_target_neutral(args.target, template)
     if args.contact:  # names, size and the target's own intersections, before any solving (as rig does)
         _check_contact_target(args, template, target)
@@ -80,6 +81,15 @@ def add_contact_target_args(p) -> None:
     p.add_argument("--contact-allow-target-pairs", action="store_true",
                    help="with --contact: keep the target neutral's own intersections (the default now; the flag "
                         "is kept for older scripts)")
+
+
+def _warn_rig_folder(template) -> None:
+    """One line on stderr for a template folder that looks as it ships (identity modes, many shapes)."""
+    from ..geometry.rig import rig_folder_warning
+
+    warning = rig_folder_warning(template)
+    if warning:
+        print(warning, file=sys.stderr)
 
 
 def _check_contact_flags(args) -> None:
@@ -192,6 +202,7 @@ def cmd_rig(args) -> int:
     _check_contact_flags(args)
     options = _rig_options(args)
     template = load_rig_folder(args.template, args.neutral, args.exclude)
+    _warn_rig_folder(template)
     target = load_target_neutral(args.target, template)
     if args.contact:
         _check_contact_target(args, template, target)

@@ -19,7 +19,7 @@ from .errors import FacebasisError, InputError, MeshError, RigError, SolverError
 from .geometry.rig import Rig, load_rig_folder, write_rig_folder
 from .geometry.transfer import DeformationTransfer, deformation_transfer
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402
 
 __all__ = [
     "FacebasisError", "InputError", "MeshError", "RigError", "SolverError", "TopologyError",

@@ -359,6 +359,9 @@ def atomic_directory(out_dir: str | os.PathLike, inputs: Iterable = (), allow: I
             _open_up(stage, directory=True)
             (stage / OUTPUT_MARKER).write_text("written by facebasis; a later run with this output folder replaces it\n")
             _set_active(stage, True)
+        from .provenance import write_into
+
+        write_into(stage)  # provenance.json: version, commit, libraries, command line, inputs' SHA-256 (commands only)
         yield stage
         with deferred_interrupts():
             _set_active(stage, False)

@@ -86,6 +86,8 @@ def test_demo_quick(tmp_path):
     assert main(["demo", "--quick", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["template_vertices"] == default_template().n_vertices
+    prov = json.loads((out / "provenance.json").read_text())  # what made the folder (no inputs: built-in data)
+    assert prov["argv"][:2] == ["facebasis", "demo"] and prov["inputs"] == [] and prov["libraries"]["casadi"]
     assert (out / "figures" / "error_maps.png").stat().st_size > 10000
     assert len(list((out / "transfer").glob("*.obj"))) == 16
     # the demo's rig is a complete `facebasis rig` folder: it verifies, reports and exports

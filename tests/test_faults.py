@@ -96,7 +96,21 @@ def own_handlers():
 
 
 def tree(folder: Path) -> dict:
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    """Every file's bytes; provenance.json without the fields that name the run (its command line,
+    working folder, the git tree's state), which legitimately differ between two runs of one output."""
+    import json
+
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_file():
+            data = p.read_bytes()
+            if p.name == "provenance.json":
+                rec = json.loads(data)
+                for key in ("argv", "cwd", "git_dirty"):
+                    rec.pop(key)
+                data = json.dumps(rec, sort_keys=True).encode()
+            out[p.relative_to(folder).as_posix()] = data
+    return out
 
 
 def leftovers(parent: Path, name: str) -> list:
@@ -322,7 +336,7 @@ def _umount(target: Path):
 def small_disk(tmp_path):
     disk = tmp_path / "disk"
     disk.mkdir()
-    _mount(["-t", "tmpfs", "-o", "size=64k", "tmpfs"], disk)
+    _mount(["-t", "tmpfs", "-o", "size=128k", "tmpfs"], disk)
     yield disk
     _umount(disk)
 

@@ -61,7 +61,7 @@ def test_transferred_obj_keeps_the_template_layout(facex):
     folder, out, target, shapes = facex
     template_lines = (folder / "jawOpen.obj").read_text().splitlines()
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == \
-        ["browInnerUp.obj", "face.mtl", "jawOpen.obj", "mouthSmile_L.obj", "neutral.obj", "skin.png"]
+        ["browInnerUp.obj", "face.mtl", "jawOpen.obj", "mouthSmile_L.obj", "neutral.obj", "provenance.json", "skin.png"]
     rig = load_rig_folder(out)
     for name in ("neutral", "jawOpen", "mouthSmile_L", "browInnerUp"):
         text = (out / f"{name}.obj").read_text()

@@ -12,7 +12,8 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "facebasis"
 
-BASE = {"base"}  # facebasis.errors, .atomic, .interrupt, .jsonio, .workers (worker processes), .progress (bars)
+BASE = {"base"}  # facebasis.errors, .atomic, .interrupt, .jsonio, .workers (worker processes), .progress (bars),
+#                  .provenance (what made an output folder)
 ALLOWED = {
     "base": BASE,
     "geometry": BASE | {"geometry"},
@@ -34,7 +35,7 @@ def unit_of(module: str) -> str:
     parts = module.split(".")[1:]
     if not parts:
         return "top"
-    if parts[0] in ("errors", "atomic", "interrupt", "jsonio", "workers", "progress"):
+    if parts[0] in ("errors", "atomic", "interrupt", "jsonio", "workers", "progress", "provenance", "_version"):
         return "base"
     if parts[0] == "cli" or ".".join(parts[:2]) in TOP:
         return "top"

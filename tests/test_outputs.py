@@ -403,3 +403,40 @@ def test_a_gltf_export_spares_a_users_bin_and_replaces_its_own(tmp_path, capsys,
     assert main(["export", "rig", "--out", "rig.gltf"]) == 0
     assert atomic.written_by_facebasis(tmp_path / "rig.bin")
     assert main(["export", "rig", "--out", "rig.gltf"]) == 0  # its own files: replaced
+
+
+def test_every_output_folder_records_its_provenance_and_its_inputs_hashes(tmp_path, monkeypatch):
+    """provenance.json: package version, Python and library versions, the command line, and the
+    SHA-256 of every input file: one changed byte in an input changes its recorded hash."""
+    import json
+
+    from facebasis import __version__
+    from facebasis.defaults.face import default_template
+    from facebasis.geometry.meshio import write_mesh
+    from facebasis.geometry.rig import write_rig_folder
+    from facebasis.provenance import PROVENANCE_FILE, sha256_file
+
+    monkeypatch.chdir(tmp_path)
+    rig = default_template()
+    write_rig_folder(tmp_path / "tmpl", rig)
+    write_mesh(tmp_path / "target.obj", rig.neutral * 1.05, rig.faces)
+    argv = ["transfer", "--template", "tmpl", "--target", "target.obj", "--out"]
+    assert main(argv + ["a"]) == 0
+    rec = json.loads((tmp_path / "a" / PROVENANCE_FILE).read_text())
+    assert rec["version"] == __version__ and rec["argv"] == ["facebasis", *argv, "a"]
+    assert set(rec["libraries"]) >= {"numpy", "scipy", "casadi", "trimesh", "matplotlib"}
+    hashes = {Path(r["path"]).name: r["sha256"] for r in rec["inputs"]}
+    assert hashes["target.obj"] == sha256_file(tmp_path / "target.obj")
+    assert len(hashes) == 1 + 1 + rig.n_shapes  # the target, the template's neutral and shapes
+    first = (tmp_path / "target.obj").read_bytes()
+    i = first.index(b"\nv ") + 4                       # the second vertex's x: one digit changed
+    j = first.index(b".", i) + 1
+    changed_byte = b"1" if first[j:j + 1] != b"1" else b"2"
+    (tmp_path / "target.obj").write_bytes(first[:j] + changed_byte + first[j + 1:])
+    assert main(argv + ["b"]) == 0
+    rec_b = json.loads((tmp_path / "b" / PROVENANCE_FILE).read_text())
+    changed = {Path(r["path"]).name: r["sha256"] for r in rec_b["inputs"]}
+    assert changed["target.obj"] != hashes["target.obj"] and changed["jawOpen.obj"] == hashes["jawOpen.obj"]
+    from facebasis.provenance import input_records
+
+    assert input_records([tmp_path / "target.obj"])[0]["sha256"] != hashes["target.obj"]

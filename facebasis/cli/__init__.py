@@ -172,7 +172,7 @@ def main(argv=None) -> int:
         args = parser.parse_args(argv)
         if guarded:
             sys.stdout = _StdoutGuard(sys.stdout)
-        return _run(args, getattr(args, "out", None))
+        return _run(args, getattr(args, "out", None), argv)
     finally:
         if guarded:
             sys.stdout = sys.__stdout__
@@ -180,12 +180,17 @@ def main(argv=None) -> int:
             signal.signal(sig, handler)
 
 
-def _run(args, out) -> int:
+def _run(args, out, argv=None) -> int:
     try:
         from .outputs import check_command_outputs
 
         check_command_outputs(args)  # the one output rule, before any work
-        return int(args.func(args) or 0)
+        from ..provenance import run_context
+        from .outputs import input_paths
+
+        spec = args.outputs
+        with run_context(["facebasis", *(sys.argv[1:] if argv is None else argv)], input_paths(args, spec)):
+            return int(args.func(args) or 0)
     except FacebasisError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -258,8 +258,10 @@ def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
     p = pp.problem
     grid = (0.01, 0.1, 10.0)
     opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never")
-    res = generate_blendshapes(p, opts)
+    shown = []
+    res = generate_blendshapes(p, opts, progress=lambda rec, total: shown.append((rec.iteration, total)))
     cv = res.crossval
+    assert shown == [(len(res.history), len(res.history))]  # the final alternation, numbered after the path's
     assert cv.candidates == "deletion" and cv.path == grid and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
     sched = cv.final_schedule(opts)
     assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))

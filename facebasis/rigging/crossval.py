@@ -81,6 +81,9 @@ CANDIDATE_MODES = ("deletion", "path", "cold", "both")
 #: ``"deletion"``: the path stops once this many consecutive candidates score above the best so far
 PATIENCE = 2
 
+#: ``"deletion"``: alternations of the largest candidate's schedule (None: ``iterations``)
+TOP_ITERATIONS = None
+
 
 @dataclass(frozen=True)
 class CrossValidation:
@@ -110,6 +113,8 @@ class CrossValidation:
     final_state: object = dataclasses.field(default=None, compare=False, repr=False)
     #: ``"deletion"``: the candidates the path went through (ascending; :attr:`grid` those scored)
     path: tuple[float, ...] = ()
+    #: alternations of the largest candidate's schedule (None: the options' ``iterations``)
+    top_iterations: int | None = None
 
     @property
     def rigs_generated(self) -> int:
@@ -131,7 +136,8 @@ class CrossValidation:
         # "path" and "deletion": the same warm-started path
         path = self.path or self.grid
         top = path[-1]
-        out = dataclasses.replace(options, alpha=(SCHEDULE_RATIO * top, top)).schedule()
+        out = dataclasses.replace(options, alpha=(SCHEDULE_RATIO * top, top),
+                                  iterations=self.top_iterations or options.iterations).schedule()
         lam_last = float(options.lam[1])
         for a in path[-2::-1]:
             if a < self.best_alpha:
@@ -275,7 +281,8 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
     p = generator.problem
     folds = int(labels.max()) + 1
     lam_last = float(opts.lam[1])
-    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never")
+    top_its = TOP_ITERATIONS or opts.iterations
+    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
     gen = generator.with_options(base)
     gen.free = generator.free
     held = [np.flatnonzero(labels == f) for f in range(folds)]
@@ -347,7 +354,7 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
                            cpu_seconds=time.process_time() - c0, candidates="deletion",
                            curves={"deletion": tuple(map(float, errors))},
                            path=tuple(grid[c] for c in sorted(states)),
-                           final_state={"X": X_in, "history": done})
+                           final_state={"X": X_in, "history": done}, top_iterations=top_its)
 
 
 __all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",

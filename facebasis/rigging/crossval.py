@@ -10,7 +10,8 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
   expressions is made *the same way* for the chosen alpha, so that the curve scores the
   procedure whose result is returned:
 
-  - ``"deletion"`` (default): one warm-started path (as ``"path"`` below) on *all* training
+  - ``"deletion"`` (default): one warm-started path (as ``"path"`` below, but the largest
+    candidate's schedule cut to :data:`TOP_ITERATIONS` alternations) on *all* training
     expressions; candidate ``a`` is scored by deleting each fold from the basis step of its last
     alternation, i.e. eq. 4 solved again on the other folds at the weights the path gave them, then
     reconstructed and scored on the held-out fold like the others. Per triangle this is the
@@ -81,8 +82,10 @@ CANDIDATE_MODES = ("deletion", "path", "cold", "both")
 #: ``"deletion"``: the path stops once this many consecutive candidates score above the best so far
 PATIENCE = 2
 
-#: ``"deletion"``: alternations of the largest candidate's schedule (None: ``iterations``)
-TOP_ITERATIONS = None
+#: ``"deletion"``: at most this many alternations of the largest candidate's schedule (its rig is
+#: transfer in effect, and its weights settle in a few): on ICT persons (m = 20 seeds 0, 1; m = 80
+#: seed 2) 3 instead of 10 chose the same alpha with the same held-out error to 4 digits, 20% less CPU
+TOP_ITERATIONS = 3
 
 
 @dataclass(frozen=True)
@@ -151,7 +154,7 @@ class CrossValidation:
                        f"{self.chain_iterations} alternations at each next smaller alpha; the final run follows "
                        "that path down to the chosen alpha",
                "deletion": "one warm-started path on all training expressions from the largest candidate "
-                           f"(schedule 5a -> a), then {self.chain_iterations} alternations at each next smaller "
+                           f"(schedule 5a -> a, {self.top_iterations} alternations), then {self.chain_iterations} alternations at each next smaller "
                            "alpha; each candidate scored by deleting each fold from its last basis step (exact "
                            "refit of eq. 4 at the path's weights); the path stops once "
                            f"{PATIENCE} candidates in a row score above the best; the returned rig is the path's "
@@ -281,7 +284,7 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
     p = generator.problem
     folds = int(labels.max()) + 1
     lam_last = float(opts.lam[1])
-    top_its = TOP_ITERATIONS or opts.iterations
+    top_its = min(TOP_ITERATIONS or opts.iterations, int(opts.iterations))
     base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
     gen = generator.with_options(base)
     gen.free = generator.free

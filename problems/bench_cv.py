@@ -1,7 +1,7 @@
 """Benchmark of ``--alpha auto``'s cost and choice (#26 §1) on ICT person problems.
 
-``python -m problems.bench_cv [--m 20 80] [--seeds 0 1 2] [--candidates fast path] [--heldout 200]
-[--out reports/cv_speed]``
+``python -m problems.bench_cv [--m 20 80] [--seeds 0 1 2] [--candidates deletion path] [--heldout 200]
+[--ipopt final|never] [--out reports/cv_speed]``
 
 For every (m, seed): the default run (``GenerationOptions()``, what ``facebasis rig`` runs) and
 ``alpha="auto"`` with every ``--candidates`` procedure, each timed (wall and CPU seconds, the load
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 
-def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool = True) -> None:
+def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool = True, ipopt: str = "final") -> None:
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
     from problems.generation import ict_person_problem
@@ -32,14 +32,15 @@ def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool 
     p = pp.problem
     runs = (["default"] if default else []) + list(candidates)
     for name in runs:
-        opts = GenerationOptions() if name == "default" else GenerationOptions(alpha="auto", cv_candidates=name)
+        opts = (GenerationOptions(ipopt=ipopt) if name == "default"
+                else GenerationOptions(alpha="auto", cv_candidates=name, ipopt=ipopt))
         load0 = os.getloadavg()[0]
         t0, c0 = time.perf_counter(), time.process_time()
         res = BlendshapeGenerator(p, opts).run()
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         err = heldout_error(res.rig, pp.heldout, p.pair_indices)
         cv = res.crossval
-        row = {"m": m, "seed": seed, "run": name, "wall": wall, "cpu": cpu, "load": [load0, os.getloadavg()[0]],
+        row = {"m": m, "seed": seed, "run": name, "ipopt": ipopt, "wall": wall, "cpu": cpu, "load": [load0, os.getloadavg()[0]],
                "alpha": res.options.alpha[1], "heldout": err, "n_heldout": n_heldout,
                "alternations": len(res.history),
                "cv": None if cv is None else {"grid": cv.grid, "errors": cv.errors, "seconds": cv.seconds,
@@ -75,9 +76,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--m", type=int, nargs="+", default=[20, 80])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--candidates", nargs="+", default=["fast", "path"])
+    ap.add_argument("--candidates", nargs="+", default=["deletion"])
     ap.add_argument("--heldout", type=int, default=200)
     ap.add_argument("--no-default", action="store_true", help="skip the default run")
+    ap.add_argument("--ipopt", default="final", choices=("final", "never", "every"),
+                    help="GenerationOptions.ipopt of both runs (final: what facebasis rig runs; never: the "
+                         "certified weight step only, no IPOPT cross-check)")
     ap.add_argument("--out", default="reports/cv_speed")
     ap.add_argument("--summary", action="store_true", help="print the table of the rows in --out")
     args = ap.parse_args(argv)
@@ -86,7 +90,7 @@ def main(argv=None) -> int:
     if not args.summary:
         for m in args.m:
             for seed in args.seeds:
-                run(m, seed, args.candidates, args.heldout, out, default=not args.no_default)
+                run(m, seed, args.candidates, args.heldout, out, default=not args.no_default, ipopt=args.ipopt)
     print(summary(out))
     return 0
 

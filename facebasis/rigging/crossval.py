@@ -156,9 +156,9 @@ class CrossValidation:
                "deletion": "one warm-started path on all training expressions from the largest candidate "
                            f"(schedule 5a -> a, {self.top_iterations} alternations), then {self.chain_iterations} alternations at each next smaller "
                            "alpha; each candidate scored by deleting each fold from its last basis step (exact "
-                           "refit of eq. 4 at the path's weights); the path stops once "
-                           f"{PATIENCE} candidates in a row score above the best; the returned rig is the path's "
-                           "at the chosen alpha",
+                           "refit of eq. 4 at the path's weights), every other candidate on the way down and the "
+                           f"best's neighbours; the path stops once {PATIENCE} scored candidates in a row are above "
+                           "the best; the returned rig is the path's at the chosen alpha",
                }
         what = how.get(self.candidates, self.candidates)
         if len(self.curves) > 1:

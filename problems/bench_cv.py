@@ -40,7 +40,8 @@ def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool 
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         err = heldout_error(res.rig, pp.heldout, p.pair_indices)
         cv = res.crossval
-        row = {"m": m, "seed": seed, "run": name, "ipopt": ipopt, "wall": wall, "cpu": cpu, "load": [load0, os.getloadavg()[0]],
+        row = {"m": m, "seed": seed, "run": name, "ipopt": ipopt, "wall": wall, "cpu": cpu,
+               "load": [load0, os.getloadavg()[0]],
                "alpha": res.options.alpha[1], "heldout": err, "n_heldout": n_heldout,
                "alternations": len(res.history),
                "cv": None if cv is None else {"grid": cv.grid, "errors": cv.errors, "seconds": cv.seconds,

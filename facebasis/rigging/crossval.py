@@ -23,7 +23,8 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
     the weights of the other folds are the path's on all expressions (fitted with fold f's rows in
     the previous basis steps), the one approximation against ``"path"``. The path is scored on
     every other candidate going down, stops once :data:`PATIENCE` scored candidates in a row are
-    above the best, and the neighbours of the best are then scored too; the rig returned is the
+    above the best, and the best's neighbour on the side of its better coarse neighbour is then
+    scored too; the rig returned is the
     path's at the chosen alpha (no separate final run: only its last alternation is made again,
     with IPOPT as ``ipopt`` says). Cost: the path (``iterations + chain x (candidates - 1)``
     alternations on all expressions) plus, per scored candidate, ``folds`` basis steps and
@@ -154,11 +155,13 @@ class CrossValidation:
                        f"{self.chain_iterations} alternations at each next smaller alpha; the final run follows "
                        "that path down to the chosen alpha",
                "deletion": "one warm-started path on all training expressions from the largest candidate "
-                           f"(schedule 5a -> a, {self.top_iterations} alternations), then {self.chain_iterations} alternations at each next smaller "
-                           "alpha; each candidate scored by deleting each fold from its last basis step (exact "
-                           "refit of eq. 4 at the path's weights), every other candidate on the way down and the "
-                           f"best's neighbours; the path stops once {PATIENCE} scored candidates in a row are above "
-                           "the best; the returned rig is the path's at the chosen alpha",
+                           f"(schedule 5a -> a, {self.top_iterations} alternations), then "
+                           f"{self.chain_iterations} alternations at each next smaller alpha; each candidate "
+                           "scored by deleting each fold from its last basis step (exact refit of eq. 4 at the "
+                           "path's weights), every other candidate on the way down and the best's neighbour "
+                           "towards its better coarse neighbour; the path stops once "
+                           f"{PATIENCE} scored candidates in a row are above the best; the returned rig is the "
+                           "path's at the chosen alpha",
                }
         what = how.get(self.candidates, self.candidates)
         if len(self.curves) > 1:
@@ -336,9 +339,13 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
                 if worse >= PATIENCE:
                     break
         b = min(scores, key=lambda c: scores[c].sum())
-        for c in (b - 1, b + 1):  # refined around the coarse minimum
-            if c in states and c not in scores:
-                score(c)
+        # refined around the coarse minimum, on the side of its better coarse neighbour (one scoring)
+        sides = [c for c in (b - 1, b + 1) if c in states and c not in scores]
+        if len(sides) == 2:
+            err = {c: scores[c + (c - b)].sum() if c + (c - b) in scores else np.inf for c in sides}
+            sides = [min(sides, key=lambda c: err[c])]
+        for c in sides:
+            score(c)
     finally:
         if pool is not None:
             pool.shutdown()

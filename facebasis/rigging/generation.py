@@ -289,9 +289,10 @@ class BlendshapeGenerator:
         schedule = opts.schedule() if schedule is None else [(float(a), float(b)) for a, b in schedule]
         self._prebuild_weight_solver(schedule)
         if done and progress is not None:  # numbered after the path's alternations
-            shown = progress
-            progress = lambda rec, total: shown(dataclasses.replace(rec, iteration=len(done) + rec.iteration),  # noqa: E731
-                                                len(done) + total)
+            shown, offset = progress, len(done)
+
+            def progress(rec, total):
+                shown(dataclasses.replace(rec, iteration=offset + rec.iteration), offset + total)
         workers = opts.threads or _available_cores()
         pool = ThreadPoolExecutor(workers) if workers > 1 else None
         try:

@@ -44,7 +44,7 @@ def test_auto_alpha_picks_transfer_when_transfer_is_the_truth():
 
 def test_auto_alpha_picks_the_small_alpha_when_the_person_differs_from_transfer():
     pp = default_face_problem(seed=0, n_train=9)
-    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID)
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID, cv_candidates="path")
     cv = cross_validate_alpha(BlendshapeGenerator(pp.problem, opts))
     assert cv.best_alpha == 0.001 and cv.errors[0] < cv.errors[1]
     # the curve is what it claims: the held-out error of the chosen schedule's rig on fold 0
@@ -160,7 +160,7 @@ def test_auto_alpha_returns_the_rig_its_curve_scored():
     folds, and the returned rig is the same path on all training expressions (not a fresh run)."""
     pp = default_face_problem(seed=0, n_train=8)
     grid = (0.01, 0.1, 10.0)
-    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never")
+    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never", cv_candidates="path")
     res = generate_blendshapes(pp.problem, opts)
     cv = res.crossval
     assert cv.candidates == "path" and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
@@ -198,7 +198,7 @@ def test_cold_candidates_do_not_depend_on_the_others():
     assert both.best_alpha == (0.01, 0.1, 10.0)[int(np.argmin(both.curves[chosen]))]
     assert (full.rigs_generated, path.rigs_generated, both.rigs_generated) == (2 * 3, 2 * 3, 2 * 5)
     assert "both procedures tried" in both.to_json()["method"] and "warm-started path" in path.to_json()["method"]
-    with pytest.raises(InputError, match=r"cv_candidates: expected one of path, cold, both, found 'warm'"):
+    with pytest.raises(InputError, match=r"cv_candidates: expected one of deletion, path, cold, both, found 'warm'"):
         GenerationOptions(cv_candidates="warm")
 
 
@@ -222,3 +222,79 @@ def test_one_iteration_auto_run_records_the_lambda_its_weights_were_solved_at(tm
     capsys.readouterr()
     assert main(["verify", str(run)]) == 0
     assert "certified optimal" in capsys.readouterr().out
+
+
+def test_fold_deletion_closed_form_equals_explicit_refits():
+    """Eq. 4 without a fold in closed form (hat matrix, Sherman-Morrison-Woodbury) equals the basis
+    step solved again on the other folds: the solutions and the held-out residuals, with m < k and m > k."""
+    from facebasis.rigging.basis import basis_rows, fold_deletion_rows
+
+    rng = np.random.default_rng(3)
+    for k, m in ((7, 9), (12, 5)):
+        t = 37
+        X = rng.uniform(0, 1, (k, m))
+        RT, AT, w = rng.normal(size=(t, 6, m)), rng.normal(size=(t, 6, k)), rng.uniform(0.5, 3, (t, k))
+        labels = np.arange(m) % 3
+        rows, resid = fold_deletion_rows(X, RT, AT, w, 0.3, labels, residuals=True, block=16)
+        for f in range(3):
+            keep = labels != f
+            ref, _, _ = basis_rows(X[:, keep], np.ascontiguousarray(RT[:, :, keep]), AT, w, 0.3)
+            Y = ref.transpose(1, 2, 0, 3).reshape(t, 6, k)          # [t, 2d + e, i]
+            r = RT[:, :, ~keep] - Y @ X[:, ~keep]                   # the explicit refit's held-out residuals
+            assert np.abs(rows[f] - ref).max() <= 1e-10 * np.abs(ref).max()
+            assert np.abs(resid[f] - r).max() <= 1e-10 * np.abs(r).max()
+    with pytest.raises(InputError, match=r"fold_deletion_rows: labels: expected \(5,\) folds >= 0, found \(9,\)"):
+        fold_deletion_rows(X, RT, AT, w, 0.3, np.zeros(9))
+
+
+def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
+    """"deletion" (the default): one path on all training expressions; a candidate's fold error is
+    the held-out error of its last basis step solved without the fold, at the path's weights; the
+    returned rig is the path's at the chosen alpha (as a full run of final_schedule gives it)."""
+    from facebasis.geometry.rig import Rig
+    from facebasis.rigging.basis import basis_rows
+
+    pp = default_face_problem(seed=0, n_train=8)
+    p = pp.problem
+    grid = (0.01, 0.1, 10.0)
+    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never")
+    shown = []
+    res = generate_blendshapes(p, opts, progress=lambda rec, total: shown.append((rec.iteration, total)))
+    cv = res.crossval
+    assert shown == [(len(res.history), len(res.history))]  # the final alternation, numbered after the path's
+    assert cv.candidates == "deletion" and cv.path == grid and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
+    sched = cv.final_schedule(opts)
+    assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))
+    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
+    gen = BlendshapeGenerator(p, dataclasses.replace(opts, alpha=(1.0, 1.0)))
+    ref = gen.run(schedule=sched)
+    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
+    assert np.array_equal(ref.weights, res.weights)
+    # the fold error of every scored candidate, recomputed explicitly
+    for c, a in enumerate(cv.grid):
+        full = list(cv.path)
+        s = cv.final_schedule(dataclasses.replace(opts)) if a == cv.best_alpha else \
+            dataclasses.replace(cv, best_alpha=a).final_schedule(opts)
+        X_in = gen.run(schedule=s[:-1]).weights if len(s) > 1 else p.initial_weights
+        assert full == list(grid)
+        for f in range(2):
+            train, held = np.flatnonzero(np.array(cv.folds) != f), np.flatnonzero(np.array(cv.folds) == f)
+            rows, _, _ = basis_rows(X_in[train].T, np.ascontiguousarray(gen.R[:, :, train]), gen.A_tilde, gen.w, a)
+            rig = Rig(p.target_neutral, p.template.faces, p.template.names, gen.deltas_of(gen.reconstruct(rows)))
+            assert heldout_error(rig, p.examples[held], p.pair_indices) == pytest.approx(cv.fold_errors[f][c], rel=1e-9)
+    assert "deleting each fold" in cv.to_json()["method"] and cv.to_json()["path"] == list(grid)
+
+
+def test_deletion_stops_the_path_once_candidates_score_worse():
+    """Transfer is the truth: the largest alpha wins and the path stops after PATIENCE coarse candidates
+    above it (the smallest alphas are never run); the neighbour of the coarse minimum is refined."""
+    from facebasis.rigging.crossval import PATIENCE
+
+    problem, _ = _transfer_is_truth_problem(0.05)
+    grid = (0.0001, 0.0003, 0.001, 0.003, 0.01, 0.03, 0.1, 1000.0)
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=grid, unobserved="fit", ipopt="never")
+    cv = cross_validate_alpha(BlendshapeGenerator(problem, opts))
+    assert PATIENCE == 2 and cv.best_alpha == 1000.0
+    # coarse: 1000, 0.03, 0.003 (two above the best: stop); refined: 0.1, the top's neighbour
+    assert cv.path == (0.003, 0.01, 0.03, 0.1, 1000.0) and cv.grid == (0.003, 0.03, 0.1, 1000.0)
+    assert min(cv.errors) == cv.errors[-1] and cv.rigs_generated == 3 * 4

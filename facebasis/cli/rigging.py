@@ -508,8 +508,10 @@ def register(sub) -> None:
     p.add_argument("--cv-grid", action="extend", nargs="+", default=[], metavar="ALPHA",
                    help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
                         f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
-    p.add_argument("--cv-candidates", choices=("path", "cold", "both"), default=None,
-                   help="--alpha auto: each fold's candidates along one warm-started path and the final run along "
+    p.add_argument("--cv-candidates", choices=("deletion", "path", "cold", "both"), default=None,
+                   help="--alpha auto: one warm-started path on all training expressions, each candidate scored by "
+                        "deleting each fold from its last basis step, the rig returned the path's at the chosen alpha "
+                        "(deletion, about 2-4 runs); each fold's candidates along its own path and the final run along "
                         "the same path down to the chosen alpha (path), every candidate from the rough weights with "
                         "its own schedule (cold, about 3.5x the cost), or both curves and the lower one (both; "
                         f"default {defaults.cv_candidates})")

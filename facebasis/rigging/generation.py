@@ -267,6 +267,7 @@ class BlendshapeGenerator:
         """
         t_start = time.perf_counter()
         crossval = None
+        done = []  # alternations already made (the "deletion" cross-validation's path)
         if schedule is None and self.options.auto_alpha:
             from .crossval import cross_validate_alpha
 
@@ -274,6 +275,11 @@ class BlendshapeGenerator:
             # the final run is made the way the curve scored the chosen alpha (crossval.final_schedule)
             schedule = crossval.final_schedule(self.options)
             self.options = dataclasses.replace(self.options, alpha=crossval.schedule)
+            if crossval.final_state is not None:  # "deletion": the path on all expressions is there up to
+                # the chosen alpha's last alternation; that one is run here (with IPOPT as the options say)
+                X0 = crossval.final_state["X"]
+                done = list(crossval.final_state["history"])
+                schedule = schedule[len(done):]
         p, opts = self.problem, self.options
         X = p.initial_weights.copy() if X0 is None else np.array(X0, dtype=np.float64)  # (m, k)
         if X.shape != p.initial_weights.shape:
@@ -282,10 +288,17 @@ class BlendshapeGenerator:
             X[:, ~self.free] = 0.0  # unobserved shapes: the first basis step already leaves them at their transfer
         schedule = opts.schedule() if schedule is None else [(float(a), float(b)) for a, b in schedule]
         self._prebuild_weight_solver(schedule)
+        if done and progress is not None:  # numbered after the path's alternations
+            shown, offset = progress, len(done)
+
+            def progress(rec, total):
+                shown(dataclasses.replace(rec, iteration=offset + rec.iteration), offset + total)
         workers = opts.threads or _available_cores()
         pool = ThreadPoolExecutor(workers) if workers > 1 else None
         try:
             history, X, deltas = self._iterate(X, schedule, pool, progress)
+            if done:  # the path's earlier alternations, renumbered after them
+                history = done + [dataclasses.replace(h, iteration=len(done) + h.iteration) for h in history]
         finally:
             if pool is not None:
                 pool.shutdown()

@@ -117,7 +117,7 @@ class GenerationOptions:
     alpha and lambda go geometrically from their first to their last value over the iterations.
     ``alpha="auto"`` chooses the alpha schedule ``(5 a, a)`` (the paper's ratio) by k-fold
     cross-validation over the training expressions (:mod:`facebasis.rigging.crossval`; ``cv_folds``,
-    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"path"``, ``"cold"`` or ``"both"``,
+    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"deletion"``, ``"path"``, ``"cold"`` or ``"both"``,
     ``cv_chain_iterations``); the final run is made the way the chosen candidate was (with
     ``"path"``: the warm-started path down to it).
 
@@ -156,7 +156,7 @@ class GenerationOptions:
     cv_folds: int = 4
     cv_grid: tuple[float, ...] = ()
     cv_chain_iterations: int = 2
-    cv_candidates: str = "path"
+    cv_candidates: str = "deletion"
 
     def __post_init__(self):
         if int(self.iterations) < 1:
@@ -189,8 +189,8 @@ class GenerationOptions:
             raise InputError(f"cv_folds: expected >= 2, found {self.cv_folds}")
         if int(self.cv_chain_iterations) < 1:
             raise InputError(f"cv_chain_iterations: expected >= 1, found {self.cv_chain_iterations}")
-        if self.cv_candidates not in ("path", "cold", "both"):  # crossval.CANDIDATE_MODES
-            raise InputError(f"cv_candidates: expected one of path, cold, both, found {self.cv_candidates!r}")
+        if self.cv_candidates not in ("deletion", "path", "cold", "both"):  # crossval.CANDIDATE_MODES
+            raise InputError(f"cv_candidates: expected one of deletion, path, cold, both, found {self.cv_candidates!r}")
         grid = tuple(float(a) for a in self.cv_grid)
         if any(not np.isfinite(a) or a <= 0 for a in grid):
             raise InputError(f"cv_grid: expected final alphas > 0, found {self.cv_grid}")

@@ -491,3 +491,18 @@ def test_transfer_warns_about_a_folder_as_it_ships(facex, tmp_path, capsys):
     assert len(warned) == 1 and "look like identity modes" in warned[0] and "--exclude 'identity*'" in warned[0]
     assert _main(base + ["--exclude", "identity*", "--out", str(tmp_path / "some")]) == 0
     assert "identity modes" not in capsys.readouterr().err
+
+
+def test_a_gltf_export_never_overwrites_a_users_file_with_a_texture_copy(facex, tmp_path, capsys):
+    """The .gltf's texture is copied beside it: a different file of that name there is the user's and
+    is refused before anything is written; the same texture (a previous export) is left as it is."""
+    _, out, _, _ = facex
+    (tmp_path / "skin.png").write_bytes(b"the user's own picture")
+    assert _main(["export", str(out), "--out", str(tmp_path / "r.gltf")]) == 2
+    err = capsys.readouterr().err
+    assert "expected to copy the texture skin.png beside it, found a different file" in err
+    assert (tmp_path / "skin.png").read_bytes() == b"the user's own picture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["skin.png"]
+    (tmp_path / "skin.png").write_bytes((out / "skin.png").read_bytes())
+    assert _main(["export", str(out), "--out", str(tmp_path / "r.gltf")]) == 0
+    assert _main(["export", str(out), "--out", str(tmp_path / "r.gltf")]) == 0  # again: its own files

@@ -332,8 +332,17 @@ def write_document(path, doc: dict, buf: GltfBuffer, referenced=()) -> Path:
     binary = buf.binary()
     bin_name = path.stem + ".bin"
     doc["buffers"] = [{"byteLength": len(binary), "uri": bin_name}]
-    for fname, src in referenced:
-        atomic_write_bytes(path.parent / fname, Path(src).read_bytes())
+    textures = [(path.parent / fname, Path(src).read_bytes()) for fname, src in referenced]
+    for dest, data in textures:  # a texture copy never replaces a different file of the user's: checked first
+        if dest.exists() and (dest.is_dir() or dest.read_bytes() != data):
+            from ..errors import InputError
+
+            raise InputError(f"glTF output {path}: expected to copy the texture {dest.name} beside it, found a "
+                             f"different {'folder' if dest.is_dir() else 'file'} {dest} there (it would be "
+                             "overwritten); write the .gltf elsewhere or use .glb (textures embedded)")
+    for dest, data in textures:
+        if not dest.exists():
+            atomic_write_bytes(dest, data)
     atomic_write_bytes(path.parent / bin_name, binary)
     atomic_write_bytes(path, json.dumps(doc, separators=(",", ":")).encode())
     return path

@@ -35,9 +35,9 @@ from .lips import (
     follow_outer_lip,
     similarity_factor,
 )
-from .lk import build_pyramid, lk_track
+from .lk import build_pyramid, lk_refine, lk_track, local_affine, patch_grid, template_align
 from .meshtrack import MeshOptions, MeshRefiner, prepare_image
-from .particle import CondensationFilter, FilterOptions
+from .particle import CondensationFilter, FilterOptions, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
 from .video import FrameSource, open_frames, to_gray
 
@@ -82,6 +82,14 @@ class TrackerOptions:
     fb_threshold: float = 1.0
     windows: dict | None = None
     inner_lips: str = "follow"
+    drift_correction: str = "affine"
+    drift_zncc: float = 0.9
+    drift_cond: float = 0.0
+    drift_samples: int = 11
+    drift_max_shift: float = 1.0
+    drift_levels: int = 1
+    drift_fb: float | None = None
+    drift_regions: tuple = ()
     filter: FilterOptions = field(default_factory=FilterOptions)
     mesh: MeshOptions = field(default_factory=MeshOptions)
 
@@ -138,8 +146,12 @@ class FaceTracker:
         self._maxwin = tuple(int(x) for x in self.windows.max(0))
         self.harmonic = HarmonicDeformer(self.mesh.vertices, self.mesh.faces, np.arange(L))  # eq. 9, factored once
         held = np.zeros(len(self.mesh.vertices), bool)
-        held[:L] = True
-        self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh)
+        prior = np.zeros(len(self.mesh.vertices))
+        if options.mesh.landmark_prior is None:
+            held[:L] = True
+        else:
+            prior[:L] = options.mesh.landmark_prior
+        self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh, prior)
         self._inner, self._partner = lip_partners(L) if options.inner_lips == "follow" else (np.zeros(0, np.int64),) * 2
         self._outer0 = lm[48:60].copy() if len(self._inner) else None    # outer lip of frame 0
         self._offset = lm[self._inner] - lm[self._partner]              # lip thickness, frame 0's axes
@@ -147,6 +159,9 @@ class FaceTracker:
         self._pyr = build_pyramid(_u8(gray), self._maxwin, options.lk_levels)
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
+        self._pyr0, self._lm0 = self._pyr, lm.copy()   # first frame: the drift-correction reference
+        self._offsets = patch_grid(self.windows, options.drift_samples)
+        self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
@@ -192,6 +207,24 @@ class FaceTracker:
         pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
         lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
                       self.opt.fb_threshold * self.scale)
+        prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
+        if self.opt.drift_correction == "affine":
+            A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+            p, zn, cond = template_align(self._template, self._offsets, prep, lk.points, A)
+            acc = (np.linalg.norm(p - lk.points, axis=1) <= self.opt.drift_max_shift * self.scale) \
+                & (zn >= self.opt.drift_zncc) & (cond >= self.opt.drift_cond)
+            self.last_accept = acc
+            lk = replace(lk, points=np.where(acc[:, None], p, lk.points))
+        elif self.opt.drift_correction == "translation":
+            rf = lk_refine(self._pyr0, pyr, self._lm0, lk.points, self.windows, self.opt.drift_levels,
+                           self.opt.drift_max_shift * self.scale,
+                           None if self.opt.drift_fb is None else self.opt.drift_fb * self.scale)
+            pts = rf.points
+            if self.opt.drift_regions:
+                from .landmarks import region_labels
+                skip = np.isin(region_labels(self.L), self.opt.drift_regions)
+                pts = np.where(skip[:, None], lk.points, pts)
+            lk = replace(lk, points=pts)
         if self.filter is not None:
             ok = lk.ok.copy()
             ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
@@ -205,8 +238,11 @@ class FaceTracker:
         # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
         V_init = self._V + self.harmonic.solve(lm - self._lm)
         V_init[: self.L] = lm
-        prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         V = self.refiner.refine(self._prep, prep, self._V, V_init) if self.opt.refine_mesh else V_init
+        if self.opt.refine_mesh and self.opt.mesh.landmark_prior is not None:
+            lm = V[: self.L].copy()
+            if self.filter is not None:
+                self.filter.place(np.arange(self.L), lm)
         t2 = time.perf_counter()
         self.timings["landmarks"] += t1 - t0
         self.timings["mesh"] += t2 - t1

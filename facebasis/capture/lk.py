@@ -85,68 +85,6 @@ def lk_track(prev_pyr, next_pyr, points: np.ndarray, windows: np.ndarray, levels
     return LKResult(pts_out, ok, fb)
 
 
-def lk_refine(ref_img, img, ref_points: np.ndarray, guess: np.ndarray, windows: np.ndarray, levels: int = 1,
-              max_shift: float = 1.0, fb_threshold: float | None = None) -> LKResult:
-    """Drift correction: refine frame-to-frame positions against the first frame's appearance.
-
-    The template update with drift correction of Matthews, Ishikawa & Baker (2004, "The template
-    update problem", strategy 3), per landmark with a translation warp: LK is run from the
-    *reference* (first) frame's patch at ``ref_points`` into ``img``, starting at ``guess`` (the
-    frame-to-frame estimate, ``cv2.OPTFLOW_USE_INITIAL_FLOW``), over few pyramid levels. The
-    refined position is accepted where LK converged within ``max_shift`` of the guess (and, with
-    ``fb_threshold``, where tracking it back lands within that distance of the reference point);
-    elsewhere (the appearance changed too much: an opened mouth, a closed eye) the frame-to-frame
-    estimate stands. Frame-to-frame errors then no longer add up over the take.
-
-    Parameters
-    ----------
-    ref_img, img : ndarray
-        Reference (first) frame and new frame, from :func:`build_pyramid`.
-    ref_points : ndarray, shape (L, 2)
-        Landmarks in the reference frame.
-    guess : ndarray, shape (L, 2)
-        Frame-to-frame positions in the new frame.
-    windows : ndarray, shape (L, 2) int
-        LK window per point.
-    levels : int
-        Pyramid levels above the base image (the guess is close: 1 is enough).
-    max_shift : float
-        Largest accepted move from the guess (pixels).
-    fb_threshold : float, optional
-        Backward check limit (pixels); None skips the backward pass.
-
-    Returns
-    -------
-    LKResult
-        ``points``: refined positions where accepted, else ``guess``; ``ok``: accepted;
-        ``fb_error``: distance moved from the guess (``inf`` where LK failed).
-    """
-    import cv2
-
-    p0 = np.asarray(ref_points, np.float32).reshape(-1, 1, 2)
-    g = np.asarray(guess, np.float32).reshape(-1, 1, 2)
-    out = g.copy()
-    moved = np.full(len(p0), np.inf)
-    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
-    wins, group = np.unique(windows, axis=0, return_inverse=True)
-    group = group.ravel()
-    for k, w in enumerate(wins):  # one call per window size (a handful of groups)
-        idx = np.flatnonzero(group == k)
-        ws = (int(w[0]), int(w[1]))
-        p1, st, _ = cv2.calcOpticalFlowPyrLK(ref_img, img, p0[idx], g[idx].copy(), winSize=ws, maxLevel=levels,
-                                             criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-        good = st.ravel() == 1
-        if fb_threshold is not None:
-            pb, st2, _ = cv2.calcOpticalFlowPyrLK(img, ref_img, p1, p0[idx].copy(), winSize=ws, maxLevel=levels,
-                                                  criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-            good &= (st2.ravel() == 1) & (np.linalg.norm((pb - p0[idx]).reshape(-1, 2), axis=1) <= fb_threshold)
-        out[idx] = p1
-        moved[idx] = np.where(good, np.linalg.norm((p1 - g[idx]).reshape(-1, 2), axis=1), np.inf)
-    pts = out.reshape(-1, 2).astype(float)
-    ok = (moved <= max_shift) & np.all(np.isfinite(pts), axis=1)
-    return LKResult(np.where(ok[:, None], pts, np.asarray(guess, float)), ok, moved)
-
-
 def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: float) -> np.ndarray:
     """Per-point linear part of the local affine map from frame 0 to frame t, ``(P, 2, 2)``.
 
@@ -186,15 +124,18 @@ def patch_grid(windows: np.ndarray, samples: int = 11) -> np.ndarray:
 
 
 def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.ndarray, A: np.ndarray,
-                   iterations: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Align first-frame patches to the new frame under a known local affine (drift correction).
+                   iterations: int = 8, affine: bool = True,
+                   affine_damping: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Align first-frame patches to the new frame (drift correction, affine warp).
 
-    Gauss-Newton on the translation ``p`` of ``sum_k w_k (I_t(p + A o_k) - mean - (T_k - mean))^2``
-    per point (zero-mean patches: insensitive to a brightness offset), started at ``guess``. ``A``
-    (from :func:`local_affine`, the mesh's deformation since frame 0) warps the template's sample
-    grid, so a stretched lip or a rotated head does not bias the match as a translation-only
-    template would (Matthews, Ishikawa & Baker 2004 drift correction with the warp of Baker &
-    Matthews' LK framework restricted to translation once the affine part is known).
+    Gauss-Newton on ``sum_k w_k (I_t(p + A o_k) - mean - (T_k - mean))^2`` per point over the
+    translation ``p`` and (``affine=True``) the linear part ``A`` of the warp, started at ``guess``
+    and at ``A`` from :func:`local_affine` (the mesh's deformation since frame 0). This is the
+    affine warp of the Lucas-Kanade framework (Baker & Matthews 2004) used as the drift-correction
+    step of Matthews, Ishikawa & Baker (2004): a stretched lip or a turned head does not bias the
+    match as a translation-only template would. Zero-mean patches make it insensitive to a
+    brightness offset; a damping ``affine_damping`` times the mean diagonal of the normal matrix on
+    the ``A`` block keeps weakly textured patches near the mesh's ``A``.
 
     Parameters
     ----------
@@ -207,46 +148,58 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     guess : ndarray, shape (L, 2)
     A : ndarray, shape (L, 2, 2)
     iterations : int
+    affine : bool
+        Also solve for ``A`` (else translation only under the given ``A``).
+    affine_damping : float
 
     Returns
     -------
     points : ndarray, shape (L, 2)
     zncc : ndarray, shape (L,)
         Zero-mean normalised correlation of the aligned patch with the template.
-    conditioning : ndarray, shape (L,)
-        Smallest eigenvalue over the largest of the Gauss-Newton matrix (aperture problem when ~0).
+    A : ndarray, shape (L, 2, 2)
+        Final linear part.
     """
     from .particle import sample
 
     img, gx, gy = prep
-    off = np.einsum("lab,lsb->lsa", A, offsets)            # (L, S, 2)
+    L = len(template)
     r2 = (offsets ** 2 / np.maximum((offsets ** 2).max(1, keepdims=True), 1e-12)).sum(-1)
     w = np.exp(-r2)                                         # (L, S) Gaussian window
     w = w / w.sum(1, keepdims=True)
     T = template - (w * template).sum(1, keepdims=True)
     p = np.asarray(guess, float).copy()
+    A = np.asarray(A, float).copy()
+    npar = 6 if affine else 2
     for _ in range(iterations):
-        X = p[:, None, :] + off
+        X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
         I = sample(img, X)
-        J = np.stack([sample(gx, X), sample(gy, X)], -1)    # (L, S, 2)
+        G = np.stack([sample(gx, X), sample(gy, X)], -1)    # (L, S, 2)
+        if affine:   # d X / d A_ab = e_a o_b
+            J = np.concatenate([G, G[..., :1] * offsets, G[..., 1:] * offsets], -1)   # (L, S, 6)
+        else:
+            J = G
         I = I - (w * I).sum(1, keepdims=True)
         J = J - (w[..., None] * J).sum(1, keepdims=True)
         r = I - T
-        H = np.einsum("ls,lsa,lsb->lab", w, J, J)
-        b = np.einsum("ls,lsa,ls->la", w, J, r)
-        det = H[:, 0, 0] * H[:, 1, 1] - H[:, 0, 1] ** 2
-        det = np.where(det > 1e-18, det, np.inf)
-        dp = -np.stack([H[:, 1, 1] * b[:, 0] - H[:, 0, 1] * b[:, 1],
-                        H[:, 0, 0] * b[:, 1] - H[:, 0, 1] * b[:, 0]], 1) / det[:, None]
-        step = np.linalg.norm(dp, axis=1, keepdims=True)
-        p = p + dp * np.minimum(1.0, 1.0 / np.maximum(step, 1e-12))   # at most 1 px per step
+        Jw = (J * w[..., None]).transpose(0, 2, 1)          # (L, P, S): batched BLAS products
+        H = Jw @ J
+        b = (Jw @ r[..., None])[..., 0]
+        if affine:
+            d = affine_damping * np.diagonal(H, axis1=1, axis2=2)[:, 2:].mean(1)
+            H[:, np.arange(2, 6), np.arange(2, 6)] += d[:, None]
+        H[:, np.arange(npar), np.arange(npar)] += 1e-12
+        dq = -np.linalg.solve(H, b[..., None])[..., 0]
+        step = np.linalg.norm(dq[:, :2], axis=1, keepdims=True)
+        scale = np.minimum(1.0, 1.0 / np.maximum(step, 1e-12))   # at most 1 px per step
+        dq = dq * scale
+        p = p + dq[:, :2]
+        if affine:
+            A = A + dq[:, 2:].reshape(L, 2, 2)
         if float(step.max()) < 1e-2:
             break
-    X = p[:, None, :] + off
+    X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
     I = sample(img, X)
     I = I - (w * I).sum(1, keepdims=True)
     zn = (w * I * T).sum(1) / np.sqrt((w * I * I).sum(1) * (w * T * T).sum(1) + 1e-12)
-    tr = H[:, 0, 0] + H[:, 1, 1]
-    disc = np.sqrt(np.maximum((H[:, 0, 0] - H[:, 1, 1]) ** 2 / 4 + H[:, 0, 1] ** 2, 0))
-    cond = (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-18)
-    return p, zn, cond
+    return p, zn, A

@@ -63,7 +63,6 @@ class MeshOptions:
     blur: float = 1.5
     texture_threshold: float = 2e-3
     max_step: float = 0.25
-    landmark_prior: float | None = None
 
 
 def barycentric_samples(n: int) -> np.ndarray:
@@ -122,14 +121,13 @@ class MeshRefiner:
     options : MeshOptions
     """
 
-    def __init__(self, V0, F, held, spacing, options: MeshOptions = MeshOptions(), prior=None):
+    def __init__(self, V0, F, held, spacing, options: MeshOptions = MeshOptions()):
         from facebasis.geometry.laplacian import cotangent_laplacian
 
         self.opt = options
         self.F = np.asarray(F, int)
         self.N = len(V0)
         self.held = np.asarray(held, bool)
-        self.prior = np.zeros(self.N) if prior is None else np.asarray(prior, float)
         self.spacing = float(spacing)
         self.bary = barycentric_samples(options.subdivision)  # (K, 3)
         self.agg = residual_groups(self.bary, options.residuals_per_triangle)  # (K, G)
@@ -182,10 +180,8 @@ class MeshRefiner:
         col = np.full(self.N, -1)
         col[U] = np.arange(len(U))
         Kuu = self.K[U][:, U]
-        lam = o.smooth_weight
         K2 = sp.kron(Kuu, sp.eye(2), format="csr")  # (2U, 2U), unknowns ordered (u, coordinate)
-        if np.any(self.prior[U] > 0):   # soft landmarks: lam K2 + P, P = diag(prior / lam)
-            K2 = (K2 + sp.diags(np.repeat(self.prior[U], 2) / lam)).tocsr()
+        lam = o.smooth_weight
         G = self.agg.shape[1]
         rows = np.repeat(np.arange(M * G).reshape(M, G, 1, 1), 3, 2).repeat(2, 3)  # (M, G, 3, 2)
         cidx = col[F][:, None, :, None] * 2 + np.arange(2)[None, None, None, :]

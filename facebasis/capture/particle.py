@@ -170,7 +170,7 @@ class CondensationFilter:
         return np.maximum(ncc(patches, self.template0), ncc(patches, self.template))
 
     def step(self, image: np.ndarray, measured: np.ndarray, measured_ok: np.ndarray,
-             detections: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+             detections: np.ndarray | None = None, trusted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Advance one frame.
 
         Parameters
@@ -183,6 +183,9 @@ class CondensationFilter:
             LK status and forward-backward check.
         detections : ndarray, shape (L, 2), optional
             Detected landmarks in the new frame (extra observations); rows of NaN are ignored.
+        trusted : ndarray, shape (L,) bool, optional
+            Measurements verified elsewhere (drift correction against the first frame): confident
+            whatever the NCC and gate tests say.
 
         Returns
         -------
@@ -194,6 +197,7 @@ class CondensationFilter:
         prev = self.estimate
         ncc_lk = self.appearance(image, measured[:, None, :])[:, 0]
         conf = measured_ok & (ncc_lk >= o.ncc_accept)
+        trusted = np.zeros(self.L, bool) if trusted is None else np.asarray(trusted, bool)
         # motion model: neighbour-predicted displacement, else damped constant velocity
         disp = np.where(conf[:, None], measured - prev, 0.0)
         Wc = self.W * conf[None, :]
@@ -201,6 +205,7 @@ class CondensationFilter:
         pred = np.where(wsum > 1e-3, (Wc @ disp) / np.maximum(wsum, 1e-12), o.velocity_damping * self.velocity)
         # gate: an LK measurement far from the motion prediction is rejected as an outlier
         conf &= np.linalg.norm(measured - (prev + pred), axis=1) <= o.gate * s
+        conf |= trusted
         sp2 = (o.process_noise * s) ** 2
         # a point lost in the previous frame gets a weak LK likelihood for one frame, so the
         # appearance against the templates can pull it back onto its feature (recovery)

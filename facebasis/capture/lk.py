@@ -104,13 +104,14 @@ def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: flo
     d0 = V0[None, :, :] - V0[centres][:, None, :]          # (P, N, 2)
     dt = Vt[None, :, :] - Vt[centres][:, None, :]
     w = np.exp(-(d0 ** 2).sum(-1) / (2 * sigma ** 2))      # (P, N)
-    M = np.einsum("pn,pna,pnb->pab", w, d0, d0)
-    Nm = np.einsum("pn,pna,pnb->pab", w, dt, d0)
+    wd0 = (w[..., None] * d0).transpose(0, 2, 1)          # (P, 2, N): batched products
+    M = wd0 @ d0
+    Nm = (wd0 @ dt).transpose(0, 2, 1)
     det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
     ok = det > 1e-9 * np.maximum(M[:, 0, 0] + M[:, 1, 1], 1e-12) ** 2
     Minv = np.stack([np.stack([M[:, 1, 1], -M[:, 0, 1]], -1), np.stack([-M[:, 1, 0], M[:, 0, 0]], -1)], 1)
     Minv = Minv / np.where(ok, det, 1.0)[:, None, None]
-    A = np.einsum("pab,pbc->pac", Nm, Minv)
+    A = Nm @ Minv
     return np.where(ok[:, None, None], A, np.eye(2)[None])
 
 

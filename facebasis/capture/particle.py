@@ -36,7 +36,8 @@ class FilterOptions:
     Attributes
     ----------
     n_particles : int
-        Particles per landmark.
+        Particles per landmark (16: with drift-corrected measurements 32 changed the landmark error
+        by under 0.005 px on the ground-truth benchmark and cost a quarter of the frame time).
     process_noise : float
         Standard deviation of the motion model noise.
     measurement_sigma : float
@@ -63,7 +64,7 @@ class FilterOptions:
         Seed of the random generator.
     """
 
-    n_particles: int = 32
+    n_particles: int = 16
     process_noise: float = 1.5
     measurement_sigma: float = 0.5
     detection_sigma: float = 3.0

@@ -70,16 +70,25 @@ def test_follow_places_inner_points_on_their_partners(seq):
 
 def test_detections_renew_the_lip_thickness(seq):
     """The cartoon's lips thicken as its mouth opens (true inner gap 3.8 -> 6.1 px while the outer
-    gap goes 13.8 -> 20.9 px), which frame 0's fixed offset cannot follow ("follow" without
-    detections overshoots to ~9 px; on this cartoon, whose lips are apart at rest, tracking the lip
-    line does better, ~1 px off). Exact detections renew the offset: the inner gap then stays within
-    0.6 px of the truth on average, better than both."""
+    gap goes 13.8 -> 20.9 px), which frame 0's fixed offset cannot follow. Exact detections renew
+    the offset: the error of the lip thickness (inner point minus its outer partner, 62-51 and
+    66-57) then stays below 0.3 px on average (measured 0.19), better than tracking the lip line
+    (0.49) and than the fixed offset (1.30). (The inner *gap* also depends on how well the outer
+    partners are tracked: measured 0.82 px with detections, 0.41 tracking the lip line and 1.70 with
+    the fixed offset; on this cartoon, whose lips are apart at rest, the lip line is trackable.)"""
+
+    def thickness_error(L):
+        d = (L[:, [62, 66]] - L[:, [51, 57]]) - (seq.landmarks[:, [62, 66]] - seq.landmarks[:, [51, 57]])
+        return np.linalg.norm(d, axis=-1)[10:].mean()
+
     truth = _gap(seq.landmarks)
     opt = TrackerOptions(refine_mesh=False)
-    err_det = np.abs(_gap(_run(seq, opt, seq.landmarks)) - truth)[10:].mean()
-    err_follow = np.abs(_gap(_run(seq, opt)) - truth)[10:].mean()
-    err_track = np.abs(_gap(_run(seq, TrackerOptions(refine_mesh=False, inner_lips="track"))) - truth)[10:].mean()
-    assert err_det < 0.6 and err_det < err_track < err_follow
+    L_det, L_follow = _run(seq, opt, seq.landmarks), _run(seq, opt)
+    L_track = _run(seq, TrackerOptions(refine_mesh=False, inner_lips="track"))
+    err_det, err_follow, err_track = (thickness_error(L) for L in (L_det, L_follow, L_track))
+    assert err_det < 0.3 and err_det < err_track < err_follow
+    # renewing the offset also brings the gap closer than the fixed offset does
+    assert np.abs(_gap(L_det) - truth)[10:].mean() < 0.6 * np.abs(_gap(L_follow) - truth)[10:].mean()
 
 
 def test_cli_inner_lips_option(tmp_path, seq):

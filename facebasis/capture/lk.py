@@ -83,3 +83,124 @@ def lk_track(prev_pyr, next_pyr, points: np.ndarray, windows: np.ndarray, levels
     pts_out = out.reshape(-1, 2).astype(float)
     ok = np.isfinite(fb) & (fb <= fb_threshold) & np.all(np.isfinite(pts_out), axis=1)
     return LKResult(pts_out, ok, fb)
+
+
+def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: float) -> np.ndarray:
+    """Per-point linear part of the local affine map from frame 0 to frame t, ``(P, 2, 2)``.
+
+    Weighted least squares over all mesh vertices with Gaussian weights of their frame-0 distance to
+    each centre: ``A_i = (sum_j w_ij dt_ij d0_ij^T) (sum_j w_ij d0_ij d0_ij^T)^-1`` with
+    ``d0_ij = V0_j - V0_i``, ``dt_ij = Vt_j - Vt_i`` (``i`` = ``centres``).
+
+    Parameters
+    ----------
+    V0, Vt : ndarray, shape (N, 2)
+        Mesh vertices in frame 0 and frame t.
+    centres : ndarray, shape (P,) int
+        Vertex indices of the points.
+    sigma : float
+        Width of the weights (pixels, frame 0).
+    """
+    d0 = V0[None, :, :] - V0[centres][:, None, :]          # (P, N, 2)
+    dt = Vt[None, :, :] - Vt[centres][:, None, :]
+    w = np.exp(-(d0 ** 2).sum(-1) / (2 * sigma ** 2))      # (P, N)
+    wd0 = (w[..., None] * d0).transpose(0, 2, 1)          # (P, 2, N): batched products
+    M = wd0 @ d0
+    Nm = (wd0 @ dt).transpose(0, 2, 1)
+    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+    ok = det > 1e-9 * np.maximum(M[:, 0, 0] + M[:, 1, 1], 1e-12) ** 2
+    Minv = np.stack([np.stack([M[:, 1, 1], -M[:, 0, 1]], -1), np.stack([-M[:, 1, 0], M[:, 0, 0]], -1)], 1)
+    Minv = Minv / np.where(ok, det, 1.0)[:, None, None]
+    A = Nm @ Minv
+    return np.where(ok[:, None, None], A, np.eye(2)[None])
+
+
+def patch_grid(windows: np.ndarray, samples: int = 11) -> np.ndarray:
+    """Sample offsets of each point's LK window, ``(L, S, 2)`` (a ``samples x samples`` grid)."""
+    u = np.linspace(-1.0, 1.0, samples)
+    gx, gy = np.meshgrid(u, u)
+    unit = np.stack([gx.ravel(), gy.ravel()], 1)            # (S, 2)
+    half = (np.asarray(windows, float) - 1.0) / 2.0          # (L, 2)
+    return unit[None] * half[:, None, :]
+
+
+def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.ndarray, A: np.ndarray,
+                   iterations: int = 8, affine: bool = True,
+                   affine_damping: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Align first-frame patches to the new frame (drift correction, affine warp).
+
+    Gauss-Newton on ``sum_k w_k (I_t(p + A o_k) - mean - (T_k - mean))^2`` per point over the
+    translation ``p`` and (``affine=True``) the linear part ``A`` of the warp, started at ``guess``
+    and at ``A`` from :func:`local_affine` (the mesh's deformation since frame 0). This is the
+    affine warp of the Lucas-Kanade framework (Baker & Matthews 2004) used as the drift-correction
+    step of Matthews, Ishikawa & Baker (2004): a stretched lip or a turned head does not bias the
+    match as a translation-only template would. Zero-mean patches make it insensitive to a
+    brightness offset; a damping ``affine_damping`` times the mean diagonal of the normal matrix on
+    the ``A`` block keeps weakly textured patches near the mesh's ``A``.
+
+    Parameters
+    ----------
+    template : ndarray, shape (L, S)
+        Frame-0 samples at ``p0 + offsets`` (blurred image).
+    offsets : ndarray, shape (L, S, 2)
+        Sample offsets (:func:`patch_grid`).
+    prep : tuple
+        ``(image, gx, gy)`` of the new frame (:func:`facebasis.capture.meshtrack.prepare_image`).
+    guess : ndarray, shape (L, 2)
+    A : ndarray, shape (L, 2, 2)
+    iterations : int
+    affine : bool
+        Also solve for ``A`` (else translation only under the given ``A``).
+    affine_damping : float
+
+    Returns
+    -------
+    points : ndarray, shape (L, 2)
+    zncc : ndarray, shape (L,)
+        Zero-mean normalised correlation of the aligned patch with the template.
+    A : ndarray, shape (L, 2, 2)
+        Final linear part.
+    """
+    from .particle import sample
+
+    img, gx, gy = prep
+    L = len(template)
+    r2 = (offsets ** 2 / np.maximum((offsets ** 2).max(1, keepdims=True), 1e-12)).sum(-1)
+    w = np.exp(-r2)                                         # (L, S) Gaussian window
+    w = w / w.sum(1, keepdims=True)
+    T = template - (w * template).sum(1, keepdims=True)
+    p = np.asarray(guess, float).copy()
+    A = np.asarray(A, float).copy()
+    npar = 6 if affine else 2
+    for _ in range(iterations):
+        X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
+        I = sample(img, X)
+        G = np.stack([sample(gx, X), sample(gy, X)], -1)    # (L, S, 2)
+        if affine:   # d X / d A_ab = e_a o_b
+            J = np.concatenate([G, G[..., :1] * offsets, G[..., 1:] * offsets], -1)   # (L, S, 6)
+        else:
+            J = G
+        I = I - (w * I).sum(1, keepdims=True)
+        J = J - (w[..., None] * J).sum(1, keepdims=True)
+        r = I - T
+        Jw = (J * w[..., None]).transpose(0, 2, 1)          # (L, P, S): batched BLAS products
+        H = Jw @ J
+        b = (Jw @ r[..., None])[..., 0]
+        if affine:
+            d = affine_damping * np.diagonal(H, axis1=1, axis2=2)[:, 2:].mean(1)
+            H[:, np.arange(2, 6), np.arange(2, 6)] += d[:, None]
+        H[:, np.arange(npar), np.arange(npar)] += 1e-12
+        dq = -np.linalg.solve(H, b[..., None])[..., 0]
+        step = np.linalg.norm(dq[:, :2], axis=1, keepdims=True)
+        scale = np.minimum(1.0, 1.0 / np.maximum(step, 1e-12))   # at most 1 px per step
+        dq = dq * scale
+        p = p + dq[:, :2]
+        if affine:
+            A = A + dq[:, 2:].reshape(L, 2, 2)
+        if float(step.max()) < 1e-2:
+            break
+    X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
+    I = sample(img, X)
+    I = I - (w * I).sum(1, keepdims=True)
+    zn = (w * I * T).sum(1) / np.sqrt((w * I * I).sum(1) * (w * T * T).sum(1) + 1e-12)
+    return p, zn, A

@@ -35,11 +35,17 @@ from .lips import (
     follow_outer_lip,
     similarity_factor,
 )
-from .lk import build_pyramid, lk_track
+from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_align
 from .meshtrack import MeshOptions, MeshRefiner, prepare_image
-from .particle import CondensationFilter, FilterOptions
+from .particle import CondensationFilter, FilterOptions, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
 from .video import FrameSource, open_frames, to_gray
+
+
+#: Drift correction: samples per side of each landmark's template grid (over its LK window),
+#: Gauss-Newton iterations per frame, damping of the affine part (measured on the ground-truth
+#: benchmark: 7 x 7 samples and 4 iterations are as precise as 11 x 11 and 8, at a third of the cost).
+DRIFT_SAMPLES, DRIFT_ITERATIONS, DRIFT_DAMPING = 7, 4, 0.05
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,26 @@ class TrackerOptions:
         (exponential average, :data:`LIP_RENEW`). ``"track"``: LK and the filter on the lip line
         itself (the earlier behaviour): closed lips put an upper and a lower point on one patch, so
         they move alike and the mouth does not open (reports/reproduction/real_clips_notes.md).
+    drift_correction : bool
+        Correct every frame's LK positions against the first frame's appearance (template update
+        with drift correction, Matthews, Ishikawa & Baker 2004): each landmark's first-frame patch
+        (its LK window, blurred) is aligned to the new frame by Gauss-Newton
+        (:func:`facebasis.capture.lk.template_align`) from the frame-to-frame position, under the
+        local affine deformation of the mesh since frame 0 (:func:`facebasis.capture.lk.local_affine`);
+        the result is accepted where it lies within ``drift_max_shift`` of the frame-to-frame
+        position and its zero-mean NCC with the template is at least ``drift_zncc``; otherwise the
+        frame-to-frame position stands. Accepted points count as confident measurements for the
+        filter. Without it, frame-to-frame LK errors add up over a take (drift).
+    drift_affine : bool
+        Solve for the affine part of the template warp too (started at the mesh's); False keeps the
+        mesh's affine and solves for the translation only.
+    drift_max_shift : float
+        Largest accepted correction, pixels at reference face size.
+    drift_zncc : float
+        Smallest accepted zero-mean NCC of the aligned patch with the first frame's.
+    drift_recovery : float
+        For a point lost in the previous frame, ``drift_max_shift`` is multiplied by this and the
+        NCC threshold raised halfway to 1, so the first frame's appearance can pull it back.
     filter : FilterOptions
     mesh : MeshOptions
     """
@@ -82,6 +108,11 @@ class TrackerOptions:
     fb_threshold: float = 1.0
     windows: dict | None = None
     inner_lips: str = "follow"
+    drift_correction: bool = True
+    drift_affine: bool = True
+    drift_max_shift: float = 1.0
+    drift_zncc: float = 0.9
+    drift_recovery: float = 4.0
     filter: FilterOptions = field(default_factory=FilterOptions)
     mesh: MeshOptions = field(default_factory=MeshOptions)
 
@@ -147,6 +178,9 @@ class FaceTracker:
         self._pyr = build_pyramid(_u8(gray), self._maxwin, options.lk_levels)
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
+        self._lost_prev = np.zeros(L, bool)
+        self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
+        self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
@@ -197,21 +231,35 @@ class FaceTracker:
         pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
         lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
                       self.opt.fb_threshold * self.scale)
+        prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
+        self._drift_ok = np.zeros(self.L, bool)
+        if self.opt.drift_correction:
+            A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+            p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
+                                     iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
+                                     affine_damping=DRIFT_DAMPING)
+            # a point lost in the previous frame may be pulled back further, on a stricter match
+            reach = self.opt.drift_max_shift * self.scale * np.where(self._lost_prev, self.opt.drift_recovery, 1.0)
+            zmin = np.where(self._lost_prev, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
+            acc = (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
+            self._drift_ok = acc
+            lk = replace(lk, points=np.where(acc[:, None], p, lk.points))
         if self.filter is not None:
-            ok = lk.ok.copy()
+            ok = lk.ok | self._drift_ok
             ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
-            lm, lost = self.filter.step(gray, lk.points, ok, detections, detection_sigma)
+            lm, lost = self.filter.step(gray, lk.points, ok, detections, detection_sigma,
+                                        trusted=self._drift_ok & ok)
         else:
-            lm, lost = lk.points, ~lk.ok
-        self.lk_motion = lk.points - self._lm   # LK's own motion of the landmarks (detection noise estimate)
+            lm, lost = lk.points, ~(lk.ok | self._drift_ok)
+        self.lk_motion = lk.points - self._lm   # the tracked (drift-corrected) motion: detection noise estimate
         lost = np.asarray(lost, bool).copy()
         lost[self._inner] = lost[self._partner]
+        self._lost_prev = lost.copy()
         lm = np.clip(self._follow_lips(lm, detections), 0, [self.size[0] - 1, self.size[1] - 1])
         t1 = time.perf_counter()
         # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
         V_init = self._V + self.harmonic.solve(lm - self._lm)
         V_init[: self.L] = lm
-        prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         V = self.refiner.refine(self._prep, prep, self._V, V_init) if self.opt.refine_mesh else V_init
         t2 = time.perf_counter()
         self.timings["landmarks"] += t1 - t0

@@ -140,3 +140,28 @@ def facex_like_folder(root, nx=12, ny=10, identities=2, normals=True):
                                    "newmtl lips\nKd 0.7 0.3 0.3\nd 1.0\n")
     (root / "skin.png").write_bytes(_png_bytes())
     return root, V0, shapes
+
+
+def swallow_signal_inside_ipopt(monkeypatch, signum):
+    """Make every IPOPT solve of the weight step raise ``signum`` and swallow the interrupt, as CasADi
+    does with an interrupt inside IPOPT (it reports a status instead); the run must stop all the same."""
+    import signal
+
+    from facebasis.rigging import weights
+
+    real_init = weights.WeightSolver.__init__
+
+    def init(self, *a, **k):
+        real_init(self, *a, **k)
+        solver = self._solver
+
+        def swallowing(**args):
+            try:
+                signal.raise_signal(signum)
+            except KeyboardInterrupt:
+                pass
+            return solver(**args)
+
+        self._solver = swallowing
+
+    monkeypatch.setattr(weights.WeightSolver, "__init__", init)

@@ -510,30 +510,14 @@ def test_signals_are_held_back_during_renames_even_with_other_threads_running(ow
 def test_sigterm_swallowed_by_ipopt_stops_rig_with_143(tmp_path, capsys, monkeypatch, own_handlers):
     """`facebasis rig` with a SIGTERM that IPOPT swallows (as CasADi does with any exception raised
     in a callback): exit 143, one line, no output folder, no staging folder."""
-    from conftest import write_rig_inputs
+    from conftest import swallow_signal_inside_ipopt, write_rig_inputs
 
     from facebasis.cli import main
-    from facebasis.rigging import weights
     from facebasis.rigging.synthetic import default_face_problem
 
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # what a fresh process has; main() installs its handler
     root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=6))
-    real_init = weights.WeightSolver.__init__
-
-    def init(self, *a, **k):
-        real_init(self, *a, **k)
-        solver = self._solver
-
-        def swallowing(**args):
-            try:
-                signal.raise_signal(signal.SIGTERM)
-            except KeyboardInterrupt:
-                pass
-            return solver(**args)
-
-        self._solver = swallowing
-
-    monkeypatch.setattr(weights.WeightSolver, "__init__", init)
+    swallow_signal_inside_ipopt(monkeypatch, signal.SIGTERM)
     code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
                  "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
                  "--out", str(root / "out"), "--iterations", "2"])

@@ -159,29 +159,13 @@ def test_outputs_get_the_usual_permissions(tmp_path):
 def test_cli_interrupted_inside_ipopt_exits_130_with_one_line_and_no_output(tmp_path, capsys, monkeypatch):
     """`facebasis rig` with an interrupt that IPOPT swallows (as CasADi does): exit 130, one line
     on stderr, no output folder, no staging folder."""
-    from conftest import write_rig_inputs
+    from conftest import swallow_signal_inside_ipopt, write_rig_inputs
 
     from facebasis.cli import main
-    from facebasis.rigging import weights
     from facebasis.rigging.synthetic import default_face_problem
 
     root = write_rig_inputs(tmp_path, default_face_problem(seed=0, n_train=6))
-    real_init = weights.WeightSolver.__init__
-
-    def init(self, *a, **k):
-        real_init(self, *a, **k)
-        solver = self._solver
-
-        def swallowing(**args):
-            try:
-                signal.raise_signal(signal.SIGINT)
-            except KeyboardInterrupt:
-                pass
-            return solver(**args)
-
-        self._solver = swallowing
-
-    monkeypatch.setattr(weights.WeightSolver, "__init__", init)
+    swallow_signal_inside_ipopt(monkeypatch, signal.SIGINT)
     code = main(["rig", "--template", str(root / "template"), "--target", str(root / "target.obj"),
                  "--examples", str(root / "examples"), "--weights", str(root / "weights.json"),
                  "--out", str(root / "out"), "--iterations", "2"])

@@ -23,15 +23,16 @@ unless --no-overlay, OUT_DIR/overlay.mp4 with the mesh drawn on the input.
 """
 
 
-def _positive_int(text: str) -> int:
+def _int_option(text: str, flag: str, minimum: int, expected: str) -> int:
+    """A whole-number option (``--max-frames``, ``--frame``): InputError naming the flag below ``minimum``."""
     from facebasis.errors import InputError
 
     try:
         v = int(text)
     except ValueError:
-        raise InputError(f"--max-frames: expected a positive integer, found {text!r}") from None
-    if v < 1:
-        raise InputError(f"--max-frames: expected a positive integer, found {v}")
+        raise InputError(f"{flag}: expected {expected}, found {text!r}") from None
+    if v < minimum:
+        raise InputError(f"{flag}: expected {expected}, found {v}")
     return v
 
 
@@ -79,7 +80,8 @@ def cmd_capture(args) -> int:
 
     if args.inner_lips not in INNER_LIPS:
         raise InputError(f"--inner-lips: expected one of {', '.join(INNER_LIPS)}, found {args.inner_lips!r}")
-    max_frames = None if args.max_frames is None else _positive_int(args.max_frames)
+    max_frames = (None if args.max_frames is None
+                  else _int_option(args.max_frames, "--max-frames", 1, "a positive integer"))
     src, lm, det = check_capture_args(args.input, args.landmarks, args.detector, args.out, max_frames, args.fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
     bar = None if args.no_progress else tqdm(total=total, unit="frame", desc="capture")
@@ -128,18 +130,6 @@ def lost_summary(lost) -> str:
             f"per frame on average; {int((per_frame > 0).sum())} of {T} frames had at least one")
 
 
-def _frame_number(text: str) -> int:
-    from facebasis.errors import InputError
-
-    try:
-        v = int(text)
-    except ValueError:
-        raise InputError(f"--frame: expected a frame number >= 0, found {text!r}") from None
-    if v < 0:
-        raise InputError(f"--frame: expected a frame number >= 0, found {v}")
-    return v
-
-
 LANDMARKS_DESCRIPTION = """Detect the 68 iBUG landmarks on one frame (the first, or --frame N counting from 0)
 of a video, an image folder or a single image, and write them as an iBUG .pts file
 that 'facebasis capture --landmarks' reads. --detector mediapipe (Apache-2.0, pip
@@ -180,7 +170,7 @@ def cmd_landmarks(args) -> int:
         raise InputError(f"--out {out}: expected a file name, found a folder")
     if not Path(args.input).exists():
         raise InputError(f"input {args.input}: expected a video file, an image or an image folder, found nothing")
-    index = _frame_number(args.frame)
+    index = _int_option(args.frame, "--frame", 0, "a frame number >= 0")
     pts, name = detect_landmarks(args.input, args.detector, index)
     atomic_write_bytes(out, format_pts(pts).encode())
     print(f"{name}: {len(pts)} landmarks on frame {index} of {args.input}")

@@ -87,7 +87,6 @@ _SIGNATURES: dict[str, tuple[bytes, ...]] = {
     ".png": (b"tEXtSoftware\x00facebasis",),
     ".pdf": (b"(facebasis",),
     ".svg": (b"facebasis",),
-    ".pts": (b"// facebasis", b"generator: facebasis"),
 }
 
 #: first lines of the CSV tables facebasis writes (registered by their writers)
@@ -230,11 +229,6 @@ def _samefile(a: Path, b: Path) -> bool:
         return False
 
 
-def check_output_folder(out_dir, inputs=(), what: str = "--out", allow=()) -> Path:
-    """:func:`check_output` for a folder (kept for the library callers)."""
-    return check_output(out_dir, inputs, kind="folder", what=what, allow=allow)
-
-
 # ----------------------------------------------------------------------------------------------
 # run folders: a lock held for the run's life, a token, recovery after a crash
 
@@ -321,18 +315,12 @@ def recover(out: str | os.PathLike) -> list[str]:
 
 
 def _swap_in(new: Path, out: Path, run: _Run) -> None:
-    """Replace ``out`` by ``new`` (inside the run folder); a failure half-way puts the old one back."""
+    """Replace ``out`` by ``new`` (inside the run folder). A failure half-way leaves the old output
+    in ``RUN/old``, which the caller's cleanup (:func:`_restore_if_moved`) or :func:`recover` puts back."""
     run.check_owned()
-    old = run.dir / _OLD
-    had_old = os.path.lexists(out)
-    if had_old:
-        os.replace(out, old)
-    try:
-        os.replace(new, out)
-    except BaseException:
-        if had_old:
-            os.replace(old, out)
-        raise
+    if os.path.lexists(out):
+        os.replace(out, run.dir / _OLD)
+    os.replace(new, out)
 
 
 @contextlib.contextmanager
@@ -439,5 +427,5 @@ def register_csv_header(header: str) -> None:
     CSV_HEADERS.add(header.encode())
 
 
-__all__ = ["OUTPUT_MARKER", "check_output", "check_output_folder", "written_by_facebasis", "recover",
+__all__ = ["OUTPUT_MARKER", "check_output", "written_by_facebasis", "recover",
            "atomic_directory", "atomic_write_bytes", "atomic_write_json", "register_csv_header"]

@@ -25,10 +25,10 @@ def cmd_report(args) -> int:
         from ..report.studies import read_table
 
         table = read_table(target)
-    elif not (target / "history.json").is_file():
-        from ..errors import InputError
+    else:
+        from ..report.run_report import check_run_folder
 
-        raise InputError(f"{target}: expected history.json (a `facebasis rig` output folder), found no such file")
+        check_run_folder(target)
     with atomic_directory(out, inputs=(target,)) as stage:
         if table is not None:
             paths = sweep_report(table, stage, formats)

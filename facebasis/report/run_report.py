@@ -144,6 +144,14 @@ def crossval_figure(run_dir, path: Path, formats=FORMATS) -> list[Path]:
     return save(fig, path, formats)
 
 
+def check_run_folder(run_dir) -> Path:
+    """``RUN_DIR/history.json`` of a ``facebasis rig`` output folder; InputError naming the folder if absent."""
+    hist_path = Path(run_dir) / "history.json"
+    if not hist_path.is_file():
+        raise InputError(f"{run_dir}: expected history.json (a `facebasis rig` output folder), found no such file")
+    return hist_path
+
+
 def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None, written_as=None) -> list[Path]:
     """Figures and tables of a ``facebasis rig`` output folder (written to ``RUN_DIR/report`` by
     default) and an ``index.md`` naming each file with what it shows and the run's key numbers.
@@ -155,9 +163,7 @@ def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None, written_as=
     from .figures import COLUMN, DIMENSIONLESS, PAGE, legend_outside, unit
 
     run = Path(run_dir)
-    hist_path = run / "history.json"
-    if not hist_path.is_file():
-        raise InputError(f"{run}: expected history.json (a `facebasis rig` output folder), found no such file")
+    hist_path = check_run_folder(run)
     try:
         history = json.loads(hist_path.read_text())
         weights = json.loads((run / "weights.json").read_text())
@@ -257,5 +263,5 @@ def shapes_figure(rig, path: Path, names=None, view="front", formats=("png", "pd
     return save(fig, path, formats)
 
 
-__all__ = ["report_run", "sweep_report", "formulation_report", "penetration_figure", "shapes_figure",
+__all__ = ["check_run_folder", "report_run", "sweep_report", "formulation_report", "penetration_figure", "shapes_figure",
            "markdown_table", "write_table"]

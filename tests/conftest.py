@@ -4,11 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from problems.ict import ict_available  # noqa: E402
+from problems.ict import ict_available  # the repository root is on sys.path: pytest's `pythonpath` (pyproject.toml)
 
 
 def grid_sheet(nx=6, ny=5, z=0.0, size=1.0):

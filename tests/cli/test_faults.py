@@ -26,7 +26,7 @@ from conftest import grid_sheet
 
 from facebasis.errors import InputError, MeshError, RigError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 DRIVER = r'''
 import importlib, json, os, signal, sys, time

@@ -10,7 +10,8 @@ One sub-package per method over a shared geometry core; imports run downward onl
 * :mod:`facebasis.rigging` - example-based blendshape generation with certified weights
   (Gao, Tan, Guo, Fan, Computer Engineering 2015)
 * :mod:`facebasis.report` - studies, figures and tables that only read results
-* :mod:`facebasis.defaults` - the generated built-in face and the demo
+* :mod:`facebasis.defaults` - the generated built-in face (data only)
+* :mod:`facebasis.apps` - applications on top of everything: the demo
 * :mod:`facebasis.cli` - the thin command line
 * :mod:`facebasis.errors`, :mod:`facebasis.atomic` - the exception hierarchy and atomic outputs
 """

@@ -6,6 +6,7 @@ units listed for it in ``ALLOWED``; a new sub-package must be given its place he
 """
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -26,7 +27,7 @@ ALLOWED = {
     "retarget": BASE | {"geometry", "defaults", "rigging", "capture", "retarget"},
     "report": BASE | {"geometry", "defaults", "contact", "rigging", "capture", "retarget", "report"},
 }
-TOP = {"cli", "__init__", "defaults.demo"}   # the command line, the package's public API, the demo
+TOP = {"cli", "__init__", "apps"}   # the command line, the package's public API, the applications (demo)
 
 
 def unit_of(module: str) -> str:
@@ -37,7 +38,7 @@ def unit_of(module: str) -> str:
         return "top"
     if parts[0] in ("errors", "atomic", "interrupt", "jsonio", "workers", "progress", "provenance", "_version"):
         return "base"
-    if parts[0] == "cli" or ".".join(parts[:2]) in TOP:
+    if parts[0] in TOP:
         return "top"
     return parts[0]
 
@@ -124,3 +125,137 @@ def test_each_subpackage_states_its_method_and_modules():
         modules = sorted(p.stem for p in init.parent.glob("*.py") if p.stem != "__init__")
         missing = [m for m in modules if m not in doc]
         assert doc and not missing, f"{init}: docstring does not list {missing}"
+
+
+# --- no import cycles -----------------------------------------------------------------------------
+# Every import counts, function-local ones included (``ast.walk`` sees them all): a cycle that is
+# only broken by deferring an import to call time is still a cycle of the design.
+
+#: TEMPORARY: module cycles inside facebasis/rigging that the weight-step rework (helper "srig", issue
+#: 25) removes in parallel. Delete this allow-list when merging that branch; until then exactly these
+#: pairs may import each other (both directions of each pair are left out of the cycle check, and a
+#: pair that no longer forms a cycle makes the test fail, so the list cannot go stale).
+ALLOWED_MODULE_CYCLES = {
+    frozenset({"facebasis.rigging.certify", "facebasis.rigging.weightproblem"}),
+    frozenset({"facebasis.rigging.generation", "facebasis.rigging.contactstep"}),
+    frozenset({"facebasis.rigging.crossval", "facebasis.rigging.generation"}),
+}
+MODULE_NAMES = {module_name(p): p for p in MODULES}
+
+
+def resolve_module(target: str, modules=MODULE_NAMES) -> str | None:
+    """The module (file) an imported name belongs to: ``facebasis.rigging.certify.CertifiedWeightSolver``
+    -> ``facebasis.rigging.certify``; a package's own name -> its ``__init__`` (named as the package)."""
+    parts = target.split(".")
+    while parts:
+        if ".".join(parts) in modules:
+            return ".".join(parts)
+        parts = parts[:-1]
+    return None
+
+
+def import_graph(modules=MODULE_NAMES, texts=None) -> dict[str, set[str]]:
+    """module -> the facebasis modules it imports (anywhere in the file), self-imports left out."""
+    graph = {}
+    for name, path in modules.items():
+        text = None if texts is None else texts.get(name)
+        deps = {resolve_module(t, modules) for _, t in imported_modules(path, text)}
+        graph[name] = deps - {None, name}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one node (Tarjan), each sorted: every import
+    cycle lies inside one of them."""
+    index, low, on_stack, stack, out, counter = {}, {}, set(), [], [], [0]
+
+    def visit(root):
+        work = [(root, iter(sorted(graph.get(root, ()))))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter[0]
+                    counter[0] += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    comp = []
+                    while True:
+                        n = stack.pop()
+                        on_stack.discard(n)
+                        comp.append(n)
+                        if n == node:
+                            break
+                    if len(comp) > 1:
+                        out.append(sorted(comp))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(out)
+
+
+def unit_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The module graph folded onto units (sub-packages, base, top), edges inside a unit left out."""
+    units: dict[str, set[str]] = {}
+    for src, deps in graph.items():
+        u = unit_of(src)
+        units.setdefault(u, set()).update(unit_of(d) for d in deps if unit_of(d) != u)
+    return units
+
+
+@functools.cache
+def package_graph() -> dict[str, set[str]]:
+    return import_graph()
+
+
+def without_allowed(graph):
+    return {a: {b for b in deps if frozenset({a, b}) not in ALLOWED_MODULE_CYCLES} for a, deps in graph.items()}
+
+
+def test_no_import_cycle_between_subpackages():
+    assert cycles(unit_graph(package_graph())) == []
+
+
+def test_no_import_cycle_between_modules():
+    assert cycles(without_allowed(package_graph())) == []
+
+
+def test_every_allowed_module_cycle_still_exists():
+    """The allow-list only names cycles that are there: one that is gone must leave the list."""
+    graph = package_graph()
+    stale = [sorted(pair) for pair in ALLOWED_MODULE_CYCLES
+             if not any(pair <= set(c) for c in cycles(graph))]
+    assert stale == [], "no longer a cycle: delete from ALLOWED_MODULE_CYCLES"
+
+
+def test_the_cycle_check_sees_a_function_local_cycle():
+    """The check can fail: two modules importing each other, one of them only inside a function,
+    and two sub-packages doing the same through a third module; an acyclic chain passes."""
+    a, b, c = PACKAGE / "geometry" / "_probe_a.py", PACKAGE / "geometry" / "_probe_b.py", PACKAGE / "contact" / "_probe_c.py"
+    modules = {"facebasis.geometry._probe_a": a, "facebasis.geometry._probe_b": b, "facebasis.contact._probe_c": c}
+    texts = {"facebasis.geometry._probe_a": "from ._probe_b import f\n",
+             "facebasis.geometry._probe_b": "def f():\n    from . import _probe_a\n    return _probe_a\n",
+             "facebasis.contact._probe_c": "from ..geometry._probe_a import g\n"}
+    graph = import_graph(modules, texts)
+    assert cycles(graph) == [["facebasis.geometry._probe_a", "facebasis.geometry._probe_b"]]
+    assert cycles(unit_graph(graph)) == []
+    texts["facebasis.geometry._probe_b"] = "import facebasis.contact._probe_c\n"
+    graph = import_graph(modules, texts)
+    assert cycles(graph) == [sorted(modules)]
+    assert cycles(unit_graph(graph)) == [["contact", "geometry"]]
+    texts["facebasis.geometry._probe_b"] = "import numpy\n"
+    assert cycles(import_graph(modules, texts)) == []

@@ -8,7 +8,7 @@ from .outputs import Outputs
 
 
 def cmd_demo(args) -> int:
-    from ..defaults.demo import run_demo
+    from ..apps.demo import run_demo
 
     run_demo(Path(args.out), quick=args.quick, log=print)
     return 0

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_directory, atomic_write_json
-from .face import default_person, default_template
+from ..defaults.face import default_person, default_template
 from ..geometry.meshio import write_mesh
 from ..geometry.rig import write_shapes
 from ..geometry.transfer import DeformationTransfer

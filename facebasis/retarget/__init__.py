@@ -18,9 +18,11 @@ foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/g
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
+framefit   one frame's pose/weight fit with frozen settings (:class:`FrameSolver`, :class:`FrameFit`)
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
 observe    which shapes the landmarks can tell apart (:func:`identifiability`)
-calibrate  the person's neutral landmarks estimated from the capture (identity "auto")
+calibrate  the person's neutral landmarks estimated from the capture (identity "auto"): an offset,
+           returned, never applied to the solver it is given
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
 preview    preview.mp4 (the source beside the rig or mesh rendered per frame) and weights.png

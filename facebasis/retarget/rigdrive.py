@@ -60,22 +60,19 @@ takes frame 0 as the neutral (wrong when the capture starts on an expression; th
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InputError
 from ..geometry.rig import Rig
-from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity
+from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
+from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .pose import (
     PI,
-    contour_weights,
-    whiten,
     fit_pose_affine,
     fit_pose_gn,
-    pose_jacobian,
     project_landmarks,
     rotation_from_vector,
     rotation_to_vector,
@@ -85,8 +82,6 @@ from .pose import (
 DEFAULT_SMOOTH = 0.05
 #: default ridge rho towards the neutral: set from the capture's landmark noise (see :func:`auto_ridge`)
 DEFAULT_RIDGE = "auto"
-#: smallest ridge of the "auto" rule (and the pilot fit's ridge): noise-free captures are solved with it
-RIDGE_FLOOR = 1e-3
 #: prior standard deviation of a weight in the "auto" rule, rho = (noise / s / PRIOR_STD)^2
 PRIOR_STD = 0.5
 #: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
@@ -151,7 +146,10 @@ class RetargetResult:
     noise : landmark noise estimate of the "auto" rule, rig units (rms residual px / s of the pilot
         fit; nan when the ridge was given)
     identity : how the neutral landmarks were obtained ("auto", "first-frame" or "rig")
-    calibration : the :class:`.calibrate.IdentityCalibration` of ``identity="auto"`` (else None)
+    calibration : the :class:`.calibrate.IdentityCalibration` of ``identity="auto"`` or
+        ``"quantile"`` (else None)
+    neutral_landmarks : (L, 3) the neutral landmark positions the frames were solved with (the rig's,
+        or the person's from the identity step); None when the result was built by hand
     """
 
     names: tuple[str, ...]
@@ -167,6 +165,7 @@ class RetargetResult:
     noise: float = float("nan")
     identity: str = "rig"
     calibration: IdentityCalibration | None = None
+    neutral_landmarks: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -175,29 +174,6 @@ class RetargetResult:
     def rotation_vectors(self) -> np.ndarray:
         """(T, 3) rotation vectors (radians)."""
         return np.stack([rotation_to_vector(R) for R in self.rotation])
-
-
-@dataclass(frozen=True)
-class FrameFit:
-    """One frame's fit (:meth:`RigRetargeter.solve_frame`): weights x (k,), scale s (px per rig
-    unit), rotation R (3, 3), translation t (2,) px, rms landmark residual px (visible landmarks;
-    nan when too few were visible), branch-and-bound nodes. Unpacks as the former 6-tuple
-    ``x, s, R, t, rms, nodes``."""
-
-    x: np.ndarray
-    s: float
-    R: np.ndarray
-    t: np.ndarray
-    rms: float
-    nodes: int
-
-    @property
-    def state(self) -> tuple:
-        """(x, s, R, t): the warm start of the next frame."""
-        return self.x, self.s, self.R, self.t
-
-    def __iter__(self):
-        return iter((self.x, self.s, self.R, self.t, self.rms, self.nodes))
 
 
 def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
@@ -294,11 +270,7 @@ class RigRetargeter:
         self.pairs = resolve_pairs(rig, pairs)
         self.smooth, self.ridge, self.alternations, self.solver = float(smooth), float(ridge), int(alternations), solver
         self.tol = float(tol)
-        self.noise = float("nan")                                 # set by run() when the ridge is "auto"
         self.first_frame_neutral = self.identity == "first-frame"
-        self.calibration: IdentityCalibration | None = None      # set by run() with identity "auto"
-        self.v0 = rig.neutral[self.indices].copy()                # (L, 3), shifted by run() unless identity "rig"
-        self.D = np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0))   # (L, 3, k)
         L = len(self.indices)
         if isinstance(contour, str):
             if contour != "auto":
@@ -312,134 +284,91 @@ class RigRetargeter:
                 raise InputError(f"{name}: expected a finite number >= 0, found {v}")
         self.contour_slide = float(contour_slide)
         self.sparsity = float(sparsity)
-        self._ipopt = None
+        ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
 
-            self._ipopt = WeightSolver(rig.n_shapes, 1, self.pairs)
+            ipopt = WeightSolver(rig.n_shapes, 1, self.pairs)
+        #: the frame solver on the rig's own neutral landmarks, with these settings (frozen: run()
+        #: builds the one it settles on from it and returns what it settled on in its result)
+        self.model = FrameSolver(
+            v0=rig.neutral[self.indices].copy(),                                       # (L, 3)
+            D=np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0)),    # (L, 3, k)
+            pairs=self.pairs, smooth=self.smooth, ridge=self.ridge, sparsity=self.sparsity,
+            contour=self.contour, contour_slide=self.contour_slide, alternations=self.alternations,
+            tol=self.tol, ipopt=ipopt)
 
     @property
     def n_landmarks(self) -> int:
         return len(self.indices)
 
+    @property
+    def v0(self) -> np.ndarray:
+        """(L, 3) the rig's neutral landmark positions."""
+        return self.model.v0
+
+    @property
+    def D(self) -> np.ndarray:
+        """(L, 3, k) the shapes' landmark deltas."""
+        return self.model.D
+
     def landmarks3d(self, x) -> np.ndarray:
-        """Rig landmark positions (L, 3) at weights x (k,)."""
-        return self.v0 + self.D @ x
-
-    def _weights(self, p, vis, s, R, t, x_prev, x_cur, sqrtw=None):
-        """x | pose: the certified weight solve (eq. 5 form) of one frame."""
-        from ..rigging.certify import CertifiedWeightSolver
-        from ..rigging.weightproblem import WeightProblem
-
-        E = whiten(np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.rig.n_shapes), sqrtw)  # (2Lv, k)
-        b = whiten((((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1), sqrtw)                # rig units
-        # variable projection: the pose may still move along its 6 linearised directions (at the
-        # current landmarks), so the weights see the data with those directions projected out
-        Qp, _ = np.linalg.qr(whiten(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T), sqrtw))
-        E = E - Qp @ (Qp.T @ E)
-        b = b - Qp @ (Qp.T @ b)
-        G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
-        c = E.T @ b
-        lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see the module docstring
-        if lin > 1e-6 * np.trace(G) / len(G):     # smaller moves no weight by 1e-6 (and makes DAQP cycle on
-            c = c - 0.5 * lin                     # near-singular problems such as ridge 1e-9 on exact data)
-        lam = self.smooth + self.ridge
-        prior = (self.smooth / lam) * x_prev            # mu||x - x_prev||^2 + rho||x||^2, completed square
-        problem = WeightProblem(G, c[None], np.array([b @ b]), self.pairs, prior[None], lam)   # eq. 5, one frame
-        if self._ipopt is not None:
-            sol = self._ipopt.solve_problem(problem, X0=x_cur[None])
-            return sol.X[0], sol.certificate_nodes
-        sol = CertifiedWeightSolver(problem).solve_example(0, start=x_cur)
-        return sol.x, sol.nodes
-
-    @contextmanager
-    def pilot_settings(self, plain: bool = True):
-        """Within the block, frames are fitted as the pilot fits are: on their own (no temporal
-        term), ridge :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as
-        fixed points (plain least squares: what the neutral or the noise estimate must explain;
-        ``plain=False`` keeps the contour's sliding, to compare fits as the frames will be
-        solved); restored after."""
-        keep = self.smooth, self.ridge, self.sparsity, self.contour_slide
-        self.smooth, self.ridge, self.sparsity = 0.0, RIDGE_FLOOR, 0.0
-        if plain:
-            self.contour_slide = 1.0
-        try:
-            yield self
-        finally:
-            self.smooth, self.ridge, self.sparsity, self.contour_slide = keep
+        """Rig landmark positions (L, 3) at weights x (k,), on the rig's neutral."""
+        return self.model.landmarks3d(x)
 
     def solve_frame(self, p, visible=None, state=None) -> FrameFit:
-        """One frame: landmarks p (L, 2), visible (L,) bool, state = previous (x, s, R, t) or None.
+        """One frame on the rig's own neutral (:meth:`.framefit.FrameSolver.solve_frame`): landmarks
+        p (L, 2), visible (L,) bool, state = previous (x, s, R, t) or None; a :class:`FrameFit`."""
+        return self.model.solve_frame(p, visible, state)
 
-        Returns a :class:`FrameFit` (unpacks as ``x, s, R, t, rms, nodes``).
-        """
-        p = np.asarray(p, np.float64)
-        vis = np.ones(len(p), bool) if visible is None else np.asarray(visible, bool)
-        k = self.rig.n_shapes
-        if vis.sum() < 4:
-            if state is None:
-                raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
-                                 f"found {int(vis.sum())}")
-            x, s, R, t = state
-            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
-        if state is None:
-            x_prev = np.zeros(k)
-            s, R, t = fit_pose_affine(self.v0[vis], p[vis])
-            n_alt = max(6, 2 * self.alternations)
-        else:
-            x_prev, s, R, t = state
-            n_alt = self.alternations
-        W = contour_weights(p, self.contour, self.contour_slide)
-        W = None if W is None else W[vis]
-        x, nodes = x_prev.copy(), 0
-        for _ in range(n_alt):
-            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
-            x_old = x
-            x, nodes = self._weights(p, vis, s, R, t, x_prev, x, W)
-            if np.abs(x - x_old).max() <= self.tol:
-                break
-        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
-        return FrameFit(x, float(s), R, t, float(rms), int(nodes))
-
-    def _adopt_first_frame(self, p, vis):
-        """Shift the rig's landmarks so that the neutral, posed on frame 0, matches it exactly.
-
-        The pose of frame 0 is fitted with all weights 0; each visible landmark's image residual
-        ``r_l`` is carried back into the rig frame in-plane, ``delta_l = R^T Pi^T r_l / s`` (no depth),
-        and added to ``v0_l``. Lost landmarks keep their rig position. The shift has no depth, so it
-        is exact while the head keeps frame 0's orientation and approximate as it turns away (tested:
-        weight error 0.04 instead of 0.24 under +-5 degrees).
-        """
-        if vis.sum() < 4:
-            raise InputError("first-frame neutral: expected at least 4 visible landmarks on frame 0")
-        s, R, t = fit_pose_affine(self.v0[vis], p[vis])
-        s, R, t, _ = fit_pose_gn(self.v0[vis], p[vis], s, R, t, iterations=10)
-        r = np.where(vis[:, None], p - (s * (self.v0 @ R.T @ PI.T) + t), 0.0)
-        self.v0 = self.v0 + (r @ PI @ R) / s
-
-    def estimate_noise(self, landmarks, visible) -> float:
+    def estimate_noise(self, landmarks, visible, model: FrameSolver | None = None) -> float:
         """Landmark noise of a capture in rig units, for the "auto" ridge.
 
         Up to :data:`PILOT_FRAMES` frames, evenly spaced, are each fitted on their own (pose and
-        weights, no temporal term, ridge :data:`RIDGE_FLOOR`); the estimate is the median over them of
-        the rms landmark residual divided by the frame's scale s. It holds whatever the rig cannot
-        reproduce: tracker noise, a face shape that differs from the rig's, landmark definitions that
-        differ from the rig's landmark vertices. Noise-free captures of the rig give ~0.
+        weights, no temporal term, ridge :data:`RIDGE_FLOOR`: :meth:`.framefit.FrameSolver.pilot` of
+        ``model``, by default :attr:`model`); the estimate is the median over them of the rms landmark
+        residual divided by the frame's scale s. It holds whatever the rig cannot reproduce: tracker
+        noise, a face shape that differs from the rig's, landmark definitions that differ from the
+        rig's landmark vertices. Noise-free captures of the rig give ~0.
         """
+        pilot = (self.model if model is None else model).pilot()
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
         out = []
-        with self.pilot_settings():
-            for f in frames:
-                if visible[f].sum() < 4:
-                    continue
-                fit = self.solve_frame(landmarks[f], visible[f], None)
-                if np.isfinite(fit.rms) and fit.s > 0:
-                    out.append(fit.rms / fit.s)
+        for f in frames:
+            if visible[f].sum() < 4:
+                continue
+            fit = pilot.solve_frame(landmarks[f], visible[f], None)
+            if np.isfinite(fit.rms) and fit.s > 0:
+                out.append(fit.rms / fit.s)
         return float(np.median(out)) if out else float("nan")
 
+    def settle(self, landmarks, visible) -> tuple[FrameSolver, IdentityCalibration | None, float]:
+        """What a capture's frames are solved with: (the frame solver on the person's neutral and
+        with the ridge of the "auto" rule, the identity calibration or None, the noise estimate (nan
+        when the ridge was given)). ``landmarks`` (T, L, 2) without NaN, ``visible`` (T, L) bool;
+        this retargeter is left as it is."""
+        model, calibration, noise = self.model, None, float("nan")
+        if self.identity == "first-frame":
+            model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
+        elif self.identity in ("auto", "quantile"):
+            calibrate = calibrate_auto if self.identity == "auto" else calibrate_identity
+            calibration = calibrate(model, landmarks, visible)
+            model = model.with_neutral(calibration.neutral)
+        if self.auto:
+            if calibration is not None and np.isfinite(calibration.noise):
+                noise = calibration.noise                  # its last pass is the same pilot fit
+            else:
+                noise = self.estimate_noise(landmarks, visible, model)
+            model = replace(model, ridge=auto_ridge(noise))
+        return model, calibration, noise
+
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
-        """Solve every frame in order. landmarks (T, L, 2); lost (T, L) bool (skipped)."""
+        """Solve every frame in order. landmarks (T, L, 2); lost (T, L) bool (skipped).
+
+        The result holds what the run settled on (:meth:`settle`): the ridge, the noise estimate, the
+        identity calibration and the neutral landmarks the frames were solved with; this retargeter
+        is left as it is, so one retargeter runs any number of captures."""
         P = np.asarray(landmarks, np.float64)
         if P.ndim != 3 or P.shape[1:] != (self.n_landmarks, 2):
             raise InputError(f"capture landmarks: expected shape (T, {self.n_landmarks}, 2), found {P.shape}")
@@ -451,28 +380,15 @@ class RigRetargeter:
         res, nodes = np.zeros(T), np.zeros(T, np.int64)
         state = None
         t0 = time.perf_counter()
-        self.v0 = self.rig.neutral[self.indices].copy()
-        self.calibration = None
-        if self.identity == "first-frame":
-            self._adopt_first_frame(np.nan_to_num(P[0]), vis[0])
-        elif self.identity == "auto":
-            self.calibration = calibrate_auto(self, np.nan_to_num(P), vis)
-        elif self.identity == "quantile":
-            self.calibration = calibrate_identity(self, np.nan_to_num(P), vis)
-        if self.auto:
-            if self.calibration is not None and np.isfinite(self.calibration.noise):
-                self.noise = self.calibration.noise          # its last pass is the same pilot fit
-            else:
-                self.noise = self.estimate_noise(np.nan_to_num(P), vis)
-            self.ridge = auto_ridge(self.noise)
+        model, calibration, noise = self.settle(np.nan_to_num(P), vis)
         for f in range(T):               # frames in order, each warm-started from the previous one
-            x, s, R, t, r, n = self.solve_frame(np.nan_to_num(P[f]), vis[f], state)
-            X[f], S[f], Rs[f], Ts[f], res[f], nodes[f] = x, s, R, t, r, n
-            state = (x, s, R, t)
+            fit = model.solve_frame(np.nan_to_num(P[f]), vis[f], state)
+            X[f], S[f], Rs[f], Ts[f], res[f], nodes[f] = fit
+            state = fit.state
             if progress is not None:
                 progress(f, T)
         return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0,
-                              self.ridge, self.noise if self.auto else float("nan"), self.identity, self.calibration)
+                              model.ridge, noise, self.identity, calibration, model.v0)
 
 
 def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth: float = DEFAULT_SMOOTH,
@@ -485,7 +401,7 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
     return RigRetargeter(rig, idx, pairs, smooth, ridge, **kw).run(landmarks, lost, fps)
 
 
-__all__ = ["RigRetargeter", "RetargetResult", "FrameFit", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
+__all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
            "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
            "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
            "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES", "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]

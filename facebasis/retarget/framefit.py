@@ -1,0 +1,158 @@
+"""One frame of rig driving: the pose/weight alternation of :mod:`.rigdrive` as a frozen solver.
+
+:class:`FrameSolver` holds everything one frame's fit needs (the neutral landmarks ``v0`` (L, 3),
+the landmark deltas ``D`` (L, 3, k) and the frozen settings of the weight model, eq. 5 with the data
+term of the rig-driving model); :meth:`FrameSolver.solve_frame` returns a :class:`FrameFit`. Nothing
+here changes its own state: a calibration (:mod:`.calibrate`) or the "auto" ridge of
+:class:`.rigdrive.RigRetargeter` builds a new solver with :meth:`FrameSolver.with_neutral`,
+:meth:`FrameSolver.shifted`, :meth:`FrameSolver.pilot` or :func:`dataclasses.replace`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import InputError
+from .pose import PI, contour_weights, fit_pose_affine, fit_pose_gn, pose_jacobian, whiten
+
+#: smallest ridge of the "auto" rule (and the pilot fit's ridge): noise-free captures are solved with it
+RIDGE_FLOOR = 1e-3
+
+
+@dataclass(frozen=True)
+class FrameFit:
+    """One frame's fit (:meth:`FrameSolver.solve_frame`): weights x (k,), scale s (px per rig
+    unit), rotation R (3, 3), translation t (2,) px, rms landmark residual px (visible landmarks;
+    nan when too few were visible), branch-and-bound nodes. Unpacks as the former 6-tuple
+    ``x, s, R, t, rms, nodes``."""
+
+    x: np.ndarray
+    s: float
+    R: np.ndarray
+    t: np.ndarray
+    rms: float
+    nodes: int
+
+    @property
+    def state(self) -> tuple:
+        """(x, s, R, t): the warm start of the next frame."""
+        return self.x, self.s, self.R, self.t
+
+    def __iter__(self):
+        return iter((self.x, self.s, self.R, self.t, self.rms, self.nodes))
+
+
+@dataclass(frozen=True, eq=False)
+class FrameSolver:
+    """The per-frame fit of :mod:`.rigdrive` with frozen settings (see its module docstring).
+
+    Attributes
+    ----------
+    v0 : (L, 3) neutral landmark positions (rig units)
+    D : (L, 3, k) landmark deltas of the k shapes
+    pairs : (p, 2) int64 exclusive shape pairs
+    smooth, ridge, sparsity : mu, rho and the sparse part of the weight prior
+    contour : (c,) int64 landmark indices of a sliding contour; contour_slide its along-contour weight
+    alternations, tol : pose/weight rounds of a warm-started frame and the weight change that ends them
+    ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
+    """
+
+    v0: np.ndarray
+    D: np.ndarray
+    pairs: np.ndarray
+    smooth: float
+    ridge: float
+    sparsity: float
+    contour: np.ndarray
+    contour_slide: float
+    alternations: int
+    tol: float
+    ipopt: object = None
+
+    @property
+    def n_shapes(self) -> int:
+        return self.D.shape[2]
+
+    def with_neutral(self, v0) -> "FrameSolver":
+        """The same solver on the neutral landmarks ``v0`` (L, 3)."""
+        return replace(self, v0=v0)
+
+    def shifted(self, offset) -> "FrameSolver":
+        """The same solver on the neutral landmarks ``v0 + offset`` (offset (L, 3), rig units)."""
+        return replace(self, v0=self.v0 + offset)
+
+    def pilot(self, plain: bool = True) -> "FrameSolver":
+        """The solver as the pilot fits use it: frames on their own (no temporal term), ridge
+        :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as fixed points
+        (plain least squares: what the neutral or the noise estimate must explain; ``plain=False``
+        keeps the contour's sliding, to compare fits as the frames will be solved)."""
+        return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0,
+                       contour_slide=1.0 if plain else self.contour_slide)
+
+    def landmarks3d(self, x) -> np.ndarray:
+        """Rig landmark positions (L, 3) at weights x (k,)."""
+        return self.v0 + self.D @ x
+
+    def _weights(self, p, vis, s, R, t, x_prev, x_cur, sqrtw=None):
+        """x | pose: the certified weight solve (eq. 5 form) of one frame."""
+        from ..rigging.certify import CertifiedWeightSolver
+        from ..rigging.weightproblem import WeightProblem
+
+        E = whiten(np.einsum("ij,ljk->lik", PI @ R, self.D[vis]).reshape(-1, self.n_shapes), sqrtw)  # (2Lv, k)
+        b = whiten((((p[vis] - t) / s) - self.v0[vis] @ (PI @ R).T).reshape(-1), sqrtw)                # rig units
+        # variable projection: the pose may still move along its 6 linearised directions (at the
+        # current landmarks), so the weights see the data with those directions projected out
+        Qp, _ = np.linalg.qr(whiten(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T), sqrtw))
+        E = E - Qp @ (Qp.T @ E)
+        b = b - Qp @ (Qp.T @ b)
+        G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
+        c = E.T @ b
+        lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see :mod:`.rigdrive`
+        if lin > 1e-6 * np.trace(G) / len(G):     # smaller moves no weight by 1e-6 (and makes DAQP cycle on
+            c = c - 0.5 * lin                     # near-singular problems such as ridge 1e-9 on exact data)
+        lam = self.smooth + self.ridge
+        prior = (self.smooth / lam) * x_prev            # mu||x - x_prev||^2 + rho||x||^2, completed square
+        problem = WeightProblem(G, c[None], np.array([b @ b]), self.pairs, prior[None], lam)   # eq. 5, one frame
+        if self.ipopt is not None:
+            sol = self.ipopt.solve_problem(problem, X0=x_cur[None])
+            return sol.X[0], sol.certificate_nodes
+        sol = CertifiedWeightSolver(problem).solve_example(0, start=x_cur)
+        return sol.x, sol.nodes
+
+    def solve_frame(self, p, visible=None, state=None) -> FrameFit:
+        """One frame: landmarks p (L, 2), visible (L,) bool, state = previous (x, s, R, t) or None.
+
+        Returns a :class:`FrameFit` (unpacks as ``x, s, R, t, rms, nodes``).
+        """
+        p = np.asarray(p, np.float64)
+        vis = np.ones(len(p), bool) if visible is None else np.asarray(visible, bool)
+        k = self.n_shapes
+        if vis.sum() < 4:
+            if state is None:
+                raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
+                                 f"found {int(vis.sum())}")
+            x, s, R, t = state
+            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
+        if state is None:
+            x_prev = np.zeros(k)
+            s, R, t = fit_pose_affine(self.v0[vis], p[vis])
+            n_alt = max(6, 2 * self.alternations)
+        else:
+            x_prev, s, R, t = state
+            n_alt = self.alternations
+        W = contour_weights(p, self.contour, self.contour_slide)
+        W = None if W is None else W[vis]
+        x, nodes = x_prev.copy(), 0
+        for _ in range(n_alt):
+            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
+            x_old = x
+            x, nodes = self._weights(p, vis, s, R, t, x_prev, x, W)
+            if np.abs(x - x_old).max() <= self.tol:
+                break
+        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
+        return FrameFit(x, float(s), R, t, float(rms), int(nodes))
+
+
+__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR"]

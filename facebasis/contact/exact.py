@@ -51,6 +51,7 @@ from ..errors import InputError
 from ..geometry.mesh import validate_vertices
 from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
+from ..workers import available_cores
 from .proximity import new_pairs
 from .qp import Cholesky, admm, normal_matrix, separation_rows  # noqa: F401  (re-exported)
 from .solver import (  # noqa: F401  (re-exported: the contact API in one place)
@@ -128,50 +129,75 @@ def _check_exclude(exclude, names, what: str) -> list:
     return exclude
 
 
-_SOLVER = None  # the solver a forked worker inherits
+def _correct_job(solver: "ContactSolver", job: tuple):
+    """One shape: ``solver.correct(name, plain delta, template delta)``."""
+    return solver.correct(*job)
 
 
-def _correct_job(job):
-    return _SOLVER.correct(*job)
+def _serve(solver, jobs, tasks, results, parent: int) -> None:
+    """A forked worker: job indices from ``tasks`` (None ends it), ``(k, result, error)`` to
+    ``results``. ``solver`` and ``jobs`` are the parent's, inherited by the fork (never pickled)."""
+    from ..workers import worker_init
+
+    worker_init(parent)  # ignores Ctrl-C, dies with its parent, prints nothing
+    while (k := tasks.get()) is not None:
+        try:
+            results.put((k, _correct_job(solver, jobs[k]), None))
+        except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
+            results.put((k, None, exc))
 
 
-def _available_cores() -> int:
+def _correct_all(solver: "ContactSolver", jobs: list, workers: int) -> list:
+    """``solver.correct`` on every job, in order; in ``workers`` forked processes when more than one
+    (largest plain motion first, so that the slow shapes start early; each worker takes the next
+    shape as it finishes one). The solver and the jobs reach the workers through the fork itself:
+    no module state, nothing large pickled; only indices and results cross the queues."""
+    import multiprocessing as mp
     import os
 
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
-def _correct_all(solver: "ContactSolver", jobs: list, workers: int | None) -> list:
-    """``solver.correct`` on every job, in order; in ``workers`` forked processes when more than one
-    (largest plain motion first, so that the slow shapes start early)."""
-    import multiprocessing as mp
-
-    from ..workers import fork_pool
-
-    workers = _available_cores() if workers is None else int(workers)
-    workers = max(1, min(workers, len(jobs)))
     if workers == 1 or "fork" not in mp.get_all_start_methods():
-        return [solver.correct(*job) for job in jobs]
-    global _SOLVER
+        return [_correct_job(solver, job) for job in jobs]
+    ctx = mp.get_context("fork")
+    tasks, results = ctx.SimpleQueue(), ctx.SimpleQueue()
     order = sorted(range(len(jobs)), key=lambda k: -float(np.abs(jobs[k][1]).sum()))
-    _SOLVER = solver
-    try:
-        pool = fork_pool(workers)  # workers ignore Ctrl-C, die with this process, print nothing
-        try:
-            done = pool.map(_correct_job, [jobs[k] for k in order], chunksize=1)
-            pool.close()
-        finally:
-            pool.terminate()
-            pool.join()
-    finally:
-        _SOLVER = None
+    for k in order:
+        tasks.put(k)
+    for _ in range(workers):
+        tasks.put(None)
+    procs = [ctx.Process(target=_serve, args=(solver, jobs, tasks, results, os.getpid()), daemon=True)
+             for _ in range(workers)]
     out = [None] * len(jobs)
-    for k, r in zip(order, done):
-        out[k] = r
+    try:
+        for p in procs:
+            p.start()
+        for _ in jobs:
+            k, result, error = results.get()
+            if error is not None:
+                raise error
+            out[k] = result
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join()
     return out
+
+
+def _correct_shapes(solver: "ContactSolver", names: list, deltas: np.ndarray, template_deltas: np.ndarray,
+                    exclude, workers: int | None):
+    """The one driver of :func:`contact_transfer` and :func:`contact_correct`: every shape of
+    ``names`` not in ``exclude`` corrected by ``solver`` (``deltas`` (k, n, 3), the shapes' plain or
+    generated deltas, corrected in place; ``template_deltas`` (k, n, 3) the template's shapes of the
+    same names). Returns (the reports, one per name (excluded ones say so), the worker count used)."""
+    reports = [ContactShape(name, excluded=True) if name in exclude else None for name in names]
+    todo = [k for k, name in enumerate(names) if name not in exclude]
+    used = max(1, min(available_cores() if workers is None else int(workers), max(len(todo), 1)))
+    jobs = [(names[k], deltas[k].copy(), template_deltas[k]) for k in todo]
+    for k, (d, rep) in zip(todo, _correct_all(solver, jobs, used)):
+        deltas[k] = d
+        reports[k] = rep
+    return reports, used
 
 
 def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anchors=None, margin=None,
@@ -218,16 +244,10 @@ def contact_transfer(template: Rig, target_neutral, names=None, exclude=(), anch
     seconds["contact setup"] = time.perf_counter() - t
     t = time.perf_counter()
     deltas = plain.deltas.copy()
-    reports = [ContactShape(name, excluded=True) if name in exclude else None for name in names]
-    idx = template.index(names)
-    todo = [k for k, name in enumerate(names) if name not in exclude]
-    jobs = [(names[k], plain.deltas[k], template.deltas[idx[k]]) for k in todo]
-    for k, (d, rep) in zip(todo, _correct_all(solver, jobs, workers)):
-        deltas[k] = d
-        reports[k] = rep
+    reports, used = _correct_shapes(solver, names, deltas, template.deltas[template.index(names)], exclude, workers)
     seconds["shapes"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t_all
-    seconds["workers"] = max(1, min(_available_cores() if workers is None else int(workers), len(todo)))
+    seconds["workers"] = used
     rig = Rig(B0, template.faces, tuple(names), deltas, source="deformation transfer, exact contact")
     return ContactResult(rig, plain, tuple(reports), seconds)
 
@@ -263,15 +283,10 @@ def contact_correct(rig: Rig, template: Rig, transfer: DeformationTransfer | Non
     seconds["contact setup"] = time.perf_counter() - t
     t = time.perf_counter()
     deltas = np.array(rig.deltas, dtype=np.float64, copy=True)
-    reports = [ContactShape(name, excluded=True) if name in exclude else None for name in names]
-    todo = [k for k, name in enumerate(names) if name not in exclude]
-    jobs = [(names[k], deltas[k].copy(), template.deltas[idx[k]]) for k in todo]
-    for k, (d, rep) in zip(todo, _correct_all(solver, jobs, workers)):
-        deltas[k] = d
-        reports[k] = rep
+    reports, used = _correct_shapes(solver, names, deltas, template.deltas[idx], exclude, workers)
     seconds["shapes"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t_all
-    seconds["workers"] = max(1, min(_available_cores() if workers is None else int(workers), max(len(todo), 1)))
+    seconds["workers"] = used
     source = f"{rig.source}, exact contact" if getattr(rig, "source", None) else "exact contact"
     return ContactResult(Rig(B0, template.faces, tuple(names), deltas, source=source), rig, tuple(reports), seconds)
 

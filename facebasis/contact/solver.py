@@ -23,10 +23,10 @@ whose fit to examples is measured by vertex positions; see :mod:`facebasis.conta
    is always feasible.
 3. Minimise ``x^T L x`` over the region R (vertices within ``reach`` of a constrained vertex in
    ``B0``, anchors excluded, the rest fixed) subject to the rows, by ADMM with OSQP's splitting on the
-   sparse problem over R (:func:`facebasis.contact.qp.admm`, the default), or (``solver="daqp"``): the dual is a small dense
-   bound-constrained QP, ``min 1/2 l^T G l - g^T l, l >= 0`` with ``G = A L_RR^-1 A^T``, built from
-   the Green's function columns ``L_RR^-1 e_c`` of the constrained vertices (one sparse Cholesky
-   of ``L_RR``) and solved exactly by DAQP's active-set method; ``x = L_RR^-1 A^T l``.
+   sparse problem over R (:func:`facebasis.contact.qp.admm`), warm-started from the last round.
+   (A dense DAQP backend over the Schur complement of the constrained vertices was removed in issue
+   25: no caller reached it, it needs an |R| x |C| Green's function block and a dense |C| x |C|
+   inverse, and the polish step below was ADMM-only, so the two did not return the same answer.)
 4. Check the result exactly on every pair touching R (the others are those of the plain solution);
    add new pairs and violated rows (rows are added lazily: at first only those the plain solution
    violates), repeat until there are none. The final check is complete: pairs away from R are the
@@ -52,8 +52,8 @@ References
 ----------
 - Sumner R. W., Popovic J. Deformation transfer for triangle meshes. SIGGRAPH 2004.
 - Ericson C. Real-Time Collision Detection. Morgan Kaufmann 2005 (closest points).
-- Arnstrom D., Bemporad A., Axehill D. A dual active-set solver for embedded quadratic programming
-    using recursive LDL^T updates. IEEE TAC 67(8), 2022 (DAQP).
+- Stellato B., Banjac G., Goulart P., Bemporad A., Boyd S. OSQP: an operator splitting solver for
+    quadratic programs. Mathematical Programming Computation 12, 2020 (the ADMM splitting).
 """
 
 from __future__ import annotations
@@ -65,12 +65,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from ..errors import InputError, SolverError
+from ..errors import InputError
 from ..geometry.mesh import median_edge_length
 from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
 from .proximity import candidate_pairs, intersecting, new_pairs, triangle_distance
-from .qp import Cholesky, admm, normal_matrix, separation_rows
+from .qp import admm, normal_matrix, separation_rows
 from .retreat import retreat
 
 #: default margin kept between constrained triangles, in median edge lengths of the target neutral
@@ -91,8 +91,8 @@ FALLBACK_ROUNDS = 1
 class ContactShape:
     """Per-shape report. ``new_pairs_left`` is the exact count after the last solve (0 = guarantee
     met); ``min_distance`` the smallest distance between constrained triangles in the result (nan
-    without constraints); ``iterations`` solve-and-check rounds; ``solver_iterations`` DAQP
-    active-set iterations summed over rounds; ``moved`` vertices in the region allowed to move;
+    without constraints); ``iterations`` solve-and-check rounds; ``solver_iterations`` ADMM
+    iterations summed over rounds; ``moved`` vertices in the region allowed to move;
     ``fallback`` solved with the transfer energy alone after the stiff energy left pairs;
     ``retreated`` vertices pulled back towards the target neutral by the last resort
     (:meth:`ContactSolver._retreat`) because the rounds still left pairs (0 = not needed), and
@@ -130,8 +130,8 @@ class ContactResult:
 
     def table(self) -> str:
         """One line per shape: new pairs of the plain shape, left after the last solve (exact count),
-        constrained pairs, plane rows, rounds of solve + exact check, QP solver iterations (ADMM or
-        DAQP) summed over rounds, vertices allowed to move, the smallest distance kept between
+        constrained pairs, plane rows, rounds of solve + exact check, QP solver iterations (ADMM)
+        summed over rounds, vertices allowed to move, the smallest distance kept between
         constrained triangles and seconds."""
         head = (f"{'shape':18s} {'plain':>6s} {'left':>5s} {'pairs':>6s} {'rows':>5s} {'rounds':>6s} {'QP it':>7s} "
                 f"{'moved':>6s} {'min dist':>9s} {'s':>6s}")
@@ -158,6 +158,37 @@ class ContactResult:
                 "shapes": [{k: clean(v) for k, v in asdict(s).items()} for s in self.shapes]}
 
 
+@dataclass
+class _Rounds:
+    """The state of one shape's solve-and-check rounds (:meth:`ContactSolver._correct`), updated by
+    one method per step of the module docstring.
+
+    P : (n, 3) the plain solution ``B0 + d*``; S : (n, 3) the template shape
+    pairs : (q, 2) constrained triangle pairs; normals (q, 3), delta (q,) their planes and gaps (step 2)
+    active : row ids ``p * 9 + 3 ka + kb`` of the rows in the QP (step 2)
+    C : constrained vertices; R : the region allowed to move (step 3)
+    x : (|R|, 3) the correction over R (None before the first solve); dual : the rows' ADMM multipliers
+    X : (n, 3) current positions ``P + x``; left : new pairs at X; found : those not yet constrained (step 4)
+    rounds, qp_iterations : solve-and-check rounds and ADMM iterations so far
+    """
+
+    P: np.ndarray
+    S: np.ndarray
+    X: np.ndarray
+    found: np.ndarray
+    left: np.ndarray
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    delta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    active: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    C: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    R: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    x: np.ndarray | None = None
+    dual: np.ndarray | None = None
+    rounds: int = 0
+    qp_iterations: int = 0
+
+
 class ContactSolver:
     """Set up once per template and target neutral; :meth:`correct` one plain-transferred shape.
 
@@ -178,11 +209,8 @@ class ContactSolver:
     """
 
     def __init__(self, dt: DeformationTransfer, margin: float | None = None, reach: float | None = None,
-                 max_iterations: int = 40, solver: str = "admm", polish: int = 3, stiffness: float = 0.0,
+                 max_iterations: int = 40, polish: int = 3, stiffness: float = 0.0,
                  fallback_iterations: int | None = None):
-        if solver not in ("admm", "daqp"):
-            raise InputError(f"contact solver: expected 'admm' or 'daqp', found {solver!r}")
-        self.solver = solver
         self.polish = int(polish)
         self.dt = dt
         self.F = dt.template.faces
@@ -255,102 +283,99 @@ class ContactSolver:
         return retreat(d, self.B0, self.F, S, left, self.reach, self.vf)
 
     def _correct(self, name, d_plain, template_delta, L, rounds):
-        import daqp
-
+        """One pass of the module's method over one shape with the energy ``L``, at most ``rounds``
+        solve-and-check rounds: (corrected delta (n, 3), :class:`ContactShape`, new pairs left (q, 2)).
+        Each numbered step of the module docstring is one method: step 1 :meth:`_plain_new_pairs`,
+        2 :meth:`_add_planes`, 3 :meth:`_grow_region` and :meth:`_solve_separation`, 4
+        :meth:`_check`, 5 :meth:`_polish`; step 6 (rounds bounded, fallback, retreat) is this loop
+        and :meth:`correct`."""
         t0 = time.perf_counter()
-        F, B0 = self.F, self.B0
-        P = B0 + d_plain
+        P = self.B0 + d_plain
         S = self.dt.template.neutral + template_delta
-        found = self._plain_new_pairs(P, S, d_plain)
-        plain_new = len(found)
-        if plain_new == 0:
+        found = self._plain_new_pairs(P, S, d_plain)                                   # step 1
+        if len(found) == 0:
             return d_plain, ContactShape(name, plain_new_pairs=0, seconds=time.perf_counter() - t0), found
-        pairs = np.zeros((0, 2), np.int64)
-        normals = np.zeros((0, 3))
-        delta = np.zeros(0)
-        active = np.zeros(0, np.int64)  # row ids p * 9 + 3 * ka + kb
-        R = np.zeros(0, np.int64)
-        C = np.zeros(0, np.int64)
-        X = P
-        x = None
-        qp_iters = 0
-        it = 0
-        left = found
-        chol = Z = K = dual = None
-        for it in range(1, rounds + 1):
-            if len(found):
-                dist, nrm = triangle_distance(B0[F[found[:, 0]]], B0[F[found[:, 1]]])
-                pairs = np.concatenate([pairs, found])
-                normals = np.concatenate([normals, nrm])
-                delta = np.concatenate([delta, np.minimum(self.margin, 0.5 * dist)])
-            vals = self._row_values(X, pairs, normals, delta)  # (q, 9)
-            add = np.flatnonzero(vals.ravel() < -0.5 * np.repeat(delta, 9))
-            active = np.union1d(active, add)
-            C_new = np.unique(F[pairs].ravel())
-            C_new = C_new[~self.is_anchor[C_new]]
-            if len(C_new) == 0:
+        st = _Rounds(P=P, S=S, X=P, found=found, left=found)
+        for st.rounds in range(1, rounds + 1):                                         # step 6: bounded
+            self._add_planes(st)                                                       # step 2
+            if not self._grow_region(st):                                              # step 3: region
                 break
-            if not np.array_equal(C_new, C):
-                C = C_new
-                hits = self.tree.query_ball_point(B0[C], self.reach)
-                R_new = np.union1d(R, np.unique(np.concatenate([np.asarray(h, np.int64) for h in hits] + [C])))
-                R_new = R_new[~self.is_anchor[R_new]]
-                if len(R_new) != len(R) and x is not None:  # carry the correction over to the larger region
-                    x_new = np.zeros((len(R_new), 3))
-                    x_new[np.searchsorted(R_new, R)] = x
-                    x = x_new
-                if chol is None or len(R_new) != len(R):
-                    R = R_new
-                    if self.solver == "daqp":
-                        chol = Cholesky(L[R][:, R])
-                    else:
-                        chol = True
-                if self.solver == "daqp":
-                    pos = np.searchsorted(R, C)
-                    E = np.zeros((len(R), len(C)))
-                    E[pos, np.arange(len(C))] = 1.0
-                    Z = chol.solve(E)  # Green's function columns of the constrained vertices, (|R|, |C|)
-                    Zc = Z[pos]
-            c = len(active)
-            if self.solver == "daqp":
-                A, g = separation_rows(F, pairs, normals, delta, active, P, C)  # rows over C's corrections
-                # primal QP over the constrained vertices' corrections y_k = x_C[:, k]: the energy of the
-                # best extension to R is 1/2 sum_k y_k^T K y_k with K = (L_RR^-1)_CC^-1 (Schur complement)
-                if K is None or K.shape[0] != len(C):
-                    K = np.linalg.inv(0.5 * (Zc + Zc.T))
-                    K = 0.5 * (K + K.T)
-                    H = np.kron(np.eye(3), K)
-                Ad = np.hstack([A[k].toarray() for k in range(3)])
-                y, _, flag, info = daqp.solve(H, np.zeros(3 * len(C)), Ad, np.full(c, 1e30), g)
-                qp_iters += int(info.get("iterations", 0))
-                if flag < 1:
-                    raise SolverError(f"contact ({name}): expected the separation QP solved, found DAQP exit flag {flag}")
-                x = np.stack([Z @ (K @ y[k * len(C):(k + 1) * len(C)]) for k in range(3)], 1)
-            else:
-                # the same QP over R's corrections (3 |R| unknowns, sparse), by ADMM (OSQP's splitting)
-                x0 = np.zeros((len(R), 3)) if x is None or len(x) != len(R) else x
-                y0 = None if dual is None else np.concatenate([dual, np.zeros(c - len(dual))])
-                x, dual, n_it = self._admm_rows(L, P, pairs, normals, delta, active, R, x0, y0)
-                qp_iters += n_it
-            X = P.copy()
-            X[R] += x
-            touch = (self.vf.T @ np.isin(np.arange(self.n), R).astype(np.float64)) > 0
-            left = new_pairs(X, F, (B0, S), faces=touch)
-            code = pairs[:, 0] * len(F) + pairs[:, 1]
-            found = left[~np.isin(left[:, 0] * len(F) + left[:, 1], code)]
-            if len(left) == 0:  # the exact guarantee is met
+            self._solve_separation(st, L, name)                                        # step 3: the QP
+            if self._check(st):                                                        # step 4
                 break
-        if (self.polish and self.solver == "admm" and len(left) == 0 and x is not None and len(pairs)
-                and np.linalg.norm(x) > POLISH_RATIO * np.linalg.norm(d_plain[R])):
-            X, x, extra = self._polish(L, P, S, X, x, pairs, normals, delta, active, R)
-            it += extra[0]
-            qp_iters += extra[1]
+        if (self.polish and len(st.left) == 0 and st.x is not None and len(st.pairs)
+                and np.linalg.norm(st.x) > POLISH_RATIO * np.linalg.norm(d_plain[st.R])):
+            X, x, extra = self._polish(L, P, S, st.X, st.x, st.pairs, st.normals, st.delta, st.active, st.R)  # step 5
+            st.X, st.x = X, x
+            st.rounds += extra[0]
+            st.qp_iterations += extra[1]
         d = d_plain.copy()
-        if x is not None:
-            d[R] += x
-        dist, _ = triangle_distance(X[F[pairs[:, 0]]], X[F[pairs[:, 1]]])
-        return d, ContactShape(name, False, plain_new, len(left), len(pairs), len(active), it, qp_iters, len(R),
-                               float(dist.min()) if len(dist) else float("nan"), time.perf_counter() - t0), left
+        if st.x is not None:
+            d[st.R] += st.x
+        dist, _ = triangle_distance(st.X[self.F[st.pairs[:, 0]]], st.X[self.F[st.pairs[:, 1]]])
+        report = ContactShape(name=name, excluded=False, plain_new_pairs=len(found), new_pairs_left=len(st.left),
+                              constrained_pairs=len(st.pairs), rows=len(st.active), iterations=st.rounds,
+                              solver_iterations=st.qp_iterations, moved=len(st.R),
+                              min_distance=float(dist.min()) if len(dist) else float("nan"),
+                              seconds=time.perf_counter() - t0)
+        return d, report, st.left
+
+    def _add_planes(self, st: "_Rounds") -> None:
+        """Step 2: the pairs found last round get their separating plane from the target neutral
+        (closest-point direction, gap ``min(margin, dist_B0 / 2)``); rows violated by more than half
+        their gap at the current positions join the active rows (rows are added lazily)."""
+        B0, F = self.B0, self.F
+        if len(st.found):
+            dist, nrm = triangle_distance(B0[F[st.found[:, 0]]], B0[F[st.found[:, 1]]])
+            st.pairs = np.concatenate([st.pairs, st.found])
+            st.normals = np.concatenate([st.normals, nrm])
+            st.delta = np.concatenate([st.delta, np.minimum(self.margin, 0.5 * dist)])
+        vals = self._row_values(st.X, st.pairs, st.normals, st.delta)  # (q, 9)
+        st.active = np.union1d(st.active, np.flatnonzero(vals.ravel() < -0.5 * np.repeat(st.delta, 9)))
+
+    def _grow_region(self, st: "_Rounds") -> bool:
+        """Step 3, the region: the constrained vertices C (corners of constrained pairs, anchors
+        excluded) and R, every vertex within ``reach`` of C in the target neutral (anchors excluded),
+        which only grows; the last correction is carried over to a larger R. False when no vertex
+        can move (every constrained corner is an anchor)."""
+        C = np.unique(self.F[st.pairs].ravel())
+        C = C[~self.is_anchor[C]]
+        if len(C) == 0:
+            return False
+        if not np.array_equal(C, st.C):
+            st.C = C
+            hits = self.tree.query_ball_point(self.B0[C], self.reach)
+            R = np.union1d(st.R, np.unique(np.concatenate([np.asarray(h, np.int64) for h in hits] + [C])))
+            R = R[~self.is_anchor[R]]
+            if len(R) != len(st.R):           # R only grows: a new length is a new region
+                if st.x is not None:          # carry the correction over to the larger region
+                    x = np.zeros((len(R), 3))
+                    x[np.searchsorted(R, st.R)] = st.x
+                    st.x = x
+                st.R = R
+        return True
+
+    def _solve_separation(self, st: "_Rounds", L, name: str) -> None:
+        """Step 3, the QP: ``min x^T L_RR x`` over R's corrections (3 |R| unknowns, sparse) subject to
+        the active rows, by ADMM (OSQP's splitting), warm-started from the last correction and duals."""
+        c = len(st.active)
+        x0 = np.zeros((len(st.R), 3)) if st.x is None or len(st.x) != len(st.R) else st.x
+        y0 = None if st.dual is None else np.concatenate([st.dual, np.zeros(c - len(st.dual))])
+        st.x, st.dual, n_it = self._admm_rows(L, st.P, st.pairs, st.normals, st.delta, st.active, st.R, x0, y0)
+        st.qp_iterations += n_it
+
+    def _check(self, st: "_Rounds") -> bool:
+        """Step 4: the exact check of every pair touching R at ``X = P + x`` (the others are the plain
+        solution's, all constrained); the new pairs not yet constrained are found for the next
+        round. True when no new pair is left (the exact guarantee is met)."""
+        F = self.F
+        st.X = st.P.copy()
+        st.X[st.R] += st.x
+        touch = (self.vf.T @ np.isin(np.arange(self.n), st.R).astype(np.float64)) > 0
+        st.left = new_pairs(st.X, F, (self.B0, st.S), faces=touch)
+        code = st.pairs[:, 0] * len(F) + st.pairs[:, 1]
+        st.found = st.left[~np.isin(st.left[:, 0] * len(F) + st.left[:, 1], code)]
+        return len(st.left) == 0
 
     def _admm_rows(self, L, P, pairs, normals, delta, active, R, x, dual):
         """The separation QP over R's corrections for the given rows, by ADMM: x (|R|, 3), duals, iterations."""

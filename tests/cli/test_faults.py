@@ -54,7 +54,7 @@ if spec.get("slow_worker"):  # a contact worker that takes long: it says so, the
     import facebasis.contact.exact as ex
     marker = spec["slow_worker"]
 
-    def slow(job):
+    def slow(*args):
         with open(marker, "a") as fh:
             fh.write(f"{os.getpid()}\n")
         time.sleep(120)

@@ -320,10 +320,11 @@ def bench_basis(repeat: int, ms=(80,)) -> dict:
 
     from facebasis.rigging import spdsolve
     from facebasis.rigging.basis import basis_rows, use_direct
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions, _available_cores
+    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.workers import available_cores
     from problems.generation import ict_person_problem
 
-    cores = _available_cores()
+    cores = available_cores()
     print(f"basis: one basis step on ICT (28,068 triangles, k = 53), {cores} cores; load average in brackets; "
           f"GIL-free dposv pointer {'found' if spdsolve.kernel() is not None else 'NOT found (SciPy wrapper used)'}")
     out = {}

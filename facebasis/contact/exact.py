@@ -53,7 +53,6 @@ from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
 from ..workers import available_cores
 from .proximity import new_pairs
-from .qp import Cholesky, admm, normal_matrix, separation_rows  # noqa: F401  (re-exported)
 from .solver import (  # noqa: F401  (re-exported: the contact API in one place)
     MARGIN_EDGES, POLISH_RATIO, REACH_EDGES, STILL_EDGES, ContactResult, ContactShape, ContactSolver,
 )

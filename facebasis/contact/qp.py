@@ -1,4 +1,4 @@
-"""The separation QP of exact contact: its energy, its rows and its two solvers.
+"""The separation QP of exact contact: its energy, its rows and its solver (ADMM).
 
 The energy of a correction ``x`` (n, 3) of a transferred shape is ``x^T L x`` with ``L = E^T E (+ w X^T X)``
 the normal matrix the deformation transfer factors (Sumner and Popovic 2004; plus the virtual-edge
@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..geometry.cholesky import SparseCholesky
 from ..geometry.gradients import edge_operator
 
 
@@ -33,25 +34,6 @@ def normal_matrix(dt, stiffness: float = 0.0) -> sp.csr_matrix:
     if stiffness:
         L = L + float(stiffness) * sp.eye(n, format="csr")
     return sp.csr_matrix(L)
-
-
-class Cholesky:
-    """Sparse Cholesky factor (cholespy) of a symmetric positive definite matrix, factored once."""
-
-    def __init__(self, M: sp.spmatrix):
-        from cholespy import CholeskySolverD, MatrixType
-
-        coo = sp.coo_matrix(M)
-        self.n = M.shape[0]
-        self._s = CholeskySolverD(self.n, coo.row.astype(np.int32), coo.col.astype(np.int32),
-                                  coo.data.astype(np.float64), MatrixType.COO)
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """``M^-1 rhs`` for rhs (n, c)."""
-        b = np.ascontiguousarray(rhs, np.float64)
-        x = np.zeros_like(b)
-        self._s.solve(b, x)
-        return x
 
 
 def separation_rows(F, pairs, normals, delta, active, P, cols):
@@ -96,7 +78,7 @@ def admm(L: sp.spmatrix, A: sp.csr_matrix, g: np.ndarray, delta: np.ndarray, x: 
     Lb = sp.block_diag([L, L, L], format="csr")
     rho = rho_scale * float(L.diagonal().mean())
     sigma = 1e-6 * rho
-    chol = Cholesky((Lb + sigma * sp.eye(n3) + rho * (A.T @ A)).tocsr())
+    chol = SparseCholesky((Lb + sigma * sp.eye(n3) + rho * (A.T @ A)).tocsr())
     At = A.T.tocsr()
     z = np.maximum(g, A @ x)
     k = 0
@@ -113,4 +95,4 @@ def admm(L: sp.spmatrix, A: sp.csr_matrix, g: np.ndarray, delta: np.ndarray, x: 
     return x, y, k
 
 
-__all__ = ["normal_matrix", "Cholesky", "separation_rows", "admm"]
+__all__ = ["normal_matrix", "separation_rows", "admm"]

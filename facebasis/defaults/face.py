@@ -24,7 +24,7 @@ mouthPucker, eyeBlink_L/R, eyeWide_L/R, browInnerUp, cheekPuff_L/R. ``_L`` is th
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -374,8 +374,3 @@ def region_masks() -> dict[str, np.ndarray]:
         "eyelids": lids,
         "eye_sockets": (topo.pocket_id >= 1) & (topo.pocket > 0),
     }
-
-
-def with_style(params: FaceParams, **changes) -> FaceParams:
-    """A copy of ``params`` with some fields changed."""
-    return replace(params, **changes)

@@ -6,14 +6,16 @@ object interface (see :class:`~facebasis.geometry.transfer.DeformationTransfer`)
 
 Modules
 -------
-mesh        validation of vertex and face arrays, median edge length
+mesh        validation of vertex and face arrays, unique edges, median edge length
 meshio      OBJ/PLY reading and writing (atomic), "read a mesh in a reference's topology"
 gradients   triangle frames and deformation gradients, the frame-to-edge operator
 laplacian   the cotangent Laplace-Beltrami operator and lumped mass (planar or spatial meshes)
 obj         the vectorised OBJ reader and writer
 objlayout   an OBJ's own layout (vt/vn, materials, groups, polygons) kept in the meshes written in its topology
+objscan     byte-level scanning of OBJ lines (keywords, numbers, face references) for objlayout
 numtext     decimal text to and from arrays, exact and loop-free (the OBJ reader's and writer's kernels)
 poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
+cholesky    the one sparse Cholesky wrapper (CHOLMOD through cholespy), factored once, solved many times
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders
 gltf        a rig as glTF 2.0 (.glb/.gltf, metres, normals, UVs, materials) with one morph target per shape

@@ -203,16 +203,7 @@ def gltf_document(neutral, faces, targets, names, *, unit: str = DEFAULT_UNIT, l
         uv[has] = layout.uv[split[1][has]]
         uv[:, 1] = 1.0 - uv[:, 1]
         attrs["TEXCOORD_0"] = buf.add(uv.astype(np.float32), "VEC2", _ARRAY_BUFFER)
-    tgts = []
-    for s0 in range(0, k, 16):  # 16 shapes per batch: one sparse product for their normals
-        Dg = (D[s0:s0 + 16, gv] * scale).astype(np.float32)
-        lo, hi = Dg.min(1), Dg.max(1)
-        dN = _gl_normals(V + D[s0:s0 + 16], F, layout, split) - N0 if normals else None
-        for j, d in enumerate(Dg):
-            t = {"POSITION": buf.add(d, "VEC3", _ARRAY_BUFFER, (lo[j], hi[j]))}
-            if normals:
-                t["NORMAL"] = buf.add(dN[j].astype(np.float32), "VEC3", _ARRAY_BUFFER)
-            tgts.append(t)
+    tgts = _morph_targets(buf, V, F, D, gv, layout, split, scale, N0)
     # materials and primitives
     doc_materials, textures, images, samplers, referenced = [], [], [], [], []
     if layout is not None and layout.material_names:
@@ -251,6 +242,23 @@ def gltf_document(neutral, faces, targets, names, *, unit: str = DEFAULT_UNIT, l
     if animation is not None:
         _animation(doc, buf, animation, k)
     return doc, buf, referenced
+
+
+def _morph_targets(buf, V, F, D, gv, layout, split, scale: float, N0) -> list:
+    """The glTF targets of the deltas ``D`` (k, n, 3) (source unit) at the glTF vertices ``gv``:
+    POSITION (metres, with its bounds) and, when the rest normals ``N0`` are given, NORMAL deltas;
+    added to ``buf`` shape by shape, 16 shapes per batch (one sparse product for their normals)."""
+    tgts = []
+    for s0 in range(0, len(D), 16):
+        Dg = (D[s0:s0 + 16, gv] * scale).astype(np.float32)
+        lo, hi = Dg.min(1), Dg.max(1)
+        dN = _gl_normals(V + D[s0:s0 + 16], F, layout, split) - N0 if N0 is not None else None
+        for j, d in enumerate(Dg):
+            t = {"POSITION": buf.add(d, "VEC3", _ARRAY_BUFFER, (lo[j], hi[j]))}
+            if N0 is not None:
+                t["NORMAL"] = buf.add(dN[j].astype(np.float32), "VEC3", _ARRAY_BUFFER)
+            tgts.append(t)
+    return tgts
 
 
 def _material(mat, buf, textures, images, samplers, tex_of_path, referenced, embed: bool, has_uv: bool) -> dict:

@@ -161,6 +161,20 @@ def connected_components(F: np.ndarray, n_vertices: int) -> np.ndarray:
     return cc(A, directed=False)[1]
 
 
+def unique_edges(F) -> np.ndarray:
+    """The unique undirected edges of triangles ``F`` (m, 3): (E, 2) int64, each row ``(low, high)``,
+    rows in lexicographic order (what ``np.unique(np.sort(edges, axis=1), axis=0)`` gives, through one
+    integer key per edge instead of a row-wise sort)."""
+    F = np.asarray(F, np.int64).reshape(-1, 3)
+    if len(F) == 0:
+        return np.zeros((0, 2), np.int64)
+    e = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    n = np.int64(hi.max()) + 1
+    key = np.unique(lo * n + hi)
+    return np.stack([key // n, key % n], axis=1)
+
+
 def median_edge_length(V, F) -> float:
     """Median length of the triangle edges of ``V`` (n, 3), ``F`` (m, 3) (interior edges counted twice)."""
     e = V[F[:, [1, 2, 0]]] - V[F]

@@ -37,10 +37,6 @@ _NL, _SP, _TAB, _CR, _SLASH, _HASH = 10, 32, 9, 13, 47, 35
 _V, _F, _OTHER = 1, 2, 0
 
 
-def _line_number(data: np.ndarray, byte: int) -> int:
-    return int(np.count_nonzero(data[:byte] == _NL)) + 1
-
-
 def _tokens(buf: np.ndarray, line_of_byte: np.ndarray):
     """Start bytes of the whitespace-separated tokens of ``buf`` and the line each is on."""
     ws = (buf == _SP) | (buf == _TAB) | (buf == _NL)

@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from cholespy import CholeskySolverD, MatrixType
 
 from ..errors import InputError, MeshError
+from .cholesky import SparseCholesky
 from .gradients import edge_operator, frame_edge_operator
 from .mesh import connected_components
 
@@ -151,10 +151,8 @@ class EdgePoisson:
         L = L.tocsc()
         self._L_fa = L[self.free][:, anchors].tocsc()
         L_ff = L[self.free][:, self.free].tocsc()
-        coo = L_ff.tocoo()
         try:
-            self._chol = CholeskySolverD(coo.shape[0], coo.row.astype(np.int32), coo.col.astype(np.int32),
-                                         coo.data.astype(np.float64), MatrixType.COO)
+            self._chol = SparseCholesky(L_ff)
         except (RuntimeError, ValueError) as exc:  # not positive definite: a part without anchor
             raise MeshError(f"reconstruction: the edge system is singular ({exc}); check for isolated vertices") from exc
 
@@ -267,8 +265,5 @@ class EdgePoisson:
             out[self.anchors] = anchor_values
             b = rhs[self.free]
             b -= self._L_fa @ np.ascontiguousarray(anchor_values)
-        b = np.ascontiguousarray(b, dtype=np.float64)
-        x = np.zeros_like(b)
-        self._chol.solve(b, x)
-        out[self.free] = x
+        out[self.free] = self._chol.solve(b)
         return out

@@ -23,6 +23,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import InputError
+from ..workers import available_cores
 
 STUDIES = ("alpha", "lambda", "grid", "noise", "methods")
 ALPHAS = tuple(float(a) for a in np.geomspace(0.01, 10.0, 10))
@@ -168,13 +169,6 @@ def study_tasks(study: str, problem: str, seeds=(0,), noise_seeds=(0, 1, 2)) -> 
     raise InputError(f"study: expected one of {STUDIES}, found {study!r}")
 
 
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover
-        return os.cpu_count() or 1
-
-
 def _quiet_local_cluster(LocalCluster, n_workers: int):
     """A local Dask cluster whose worker processes stop with this one and print nothing.
 
@@ -226,7 +220,7 @@ def run_tasks(tasks, scheduler: str | None = None, workers: int | None = None, p
         client = Client(scheduler)
         cluster = None
     else:
-        cluster = _quiet_local_cluster(LocalCluster, workers or _cores())
+        cluster = _quiet_local_cluster(LocalCluster, workers or available_cores())
         client = Client(cluster)
     try:
         futures = client.map(run_task, tasks, pure=False)

@@ -55,11 +55,24 @@ def _bar_labels(ax, ys, vals, errs=None, fmt="{:.3g}"):
 
 
 def sweep_report(rows, out, formats=FORMATS) -> list[Path]:
-    """Figures and tables of a results table (rows of :func:`facebasis.report.studies.read_table`)."""
-    from .figures import COLUMN, DIMENSIONLESS, PAGE, legend_outside, unit
-
+    """Figures and tables of a results table (rows of :func:`facebasis.report.studies.read_table`):
+    one figure per parameter sweep (alpha, lambda), the alpha x lambda heat map, the noise study and
+    the methods table and figure, each for the studies the table holds."""
     out = Path(out)
     plt = _pyplot()
+    paths: list[Path] = []
+    paths += _parameter_sweeps(plt, rows, out, formats)
+    for study, figure in (("grid", _grid_heatmap), ("noise", _noise_figure), ("methods", _methods_report)):
+        rs = _rows(rows, study)
+        if rs:
+            paths += figure(plt, rows, rs, out, formats)
+    return paths
+
+
+def _parameter_sweeps(plt, rows, out, formats) -> list[Path]:
+    """The alpha and lambda sweeps: held-out and training error against the constant parameter."""
+    from .figures import COLUMN, DIMENSIONLESS, legend_outside, unit
+
     paths: list[Path] = []
     for study, key, label, note in (("alpha", "alpha0", unit(r"$\alpha$, constant over the run", DIMENSIONLESS), "alpha_sweep"),
                                     ("lambda", "lam0", unit(r"$\lambda$, constant over the run", "cm²"), "lambda_sweep")):
@@ -87,78 +100,96 @@ def sweep_report(rows, out, formats=FORMATS) -> list[Path]:
         seeds = f"mean ± std over {n_seeds} seeds" if n_seeds > 1 else "n = 1 seed"
         ax.set_title(f"{study} sweep ({rs[0]['problem']} face, {seeds})")
         paths += save(fig, out / note, formats)
-    rs = _rows(rows, "grid")
-    if rs:
-        A, L = _by(rs, "alpha0"), _by(rs, "lam0")
-        H = np.full((len(A), len(L)), np.nan)
-        for i, a in enumerate(A):
-            for j, v in enumerate(L):
-                xs = [r["heldout_error"] for r in rs if r["alpha0"] == a and r["lam0"] == v]
-                H[i, j] = np.mean(xs) if xs else np.nan
-        fig, ax = plt.subplots(figsize=(COLUMN, 3.0), layout="constrained")
-        im = ax.imshow(H, origin="lower", cmap="viridis", aspect="auto")
-        ax.set_xticks(range(len(L)), [f"{v:.3g}" for v in L])
-        ax.set_yticks(range(len(A)), [f"{a:.2g}" for a in A])
-        mid = np.nanmean([np.nanmin(H), np.nanmax(H)])
-        for i in range(len(A)):
-            for j in range(len(L)):
-                ax.text(j, i, f"{H[i, j]:.3f}", ha="center", va="center", fontsize=8,
-                        color="w" if H[i, j] < mid else "k")
-        ax.set_xlabel(unit(r"$\lambda$", "cm²"))
-        ax.set_ylabel(unit(r"$\alpha$", DIMENSIONLESS))
-        n_seeds = len(_by(rs, "seed"))
-        ax.set_title(f"held-out error over α × λ ({rs[0]['problem']} face, " +
-                     (f"mean of {n_seeds} seeds)" if n_seeds > 1 else "n = 1 seed)"))
-        fig.colorbar(im, ax=ax).set_label(unit("held-out relative error", DIMENSIONLESS))
-        paths += save(fig, out / "alpha_lambda_heatmap", formats)
-    rs = _rows(rows, "noise")
-    if rs:
-        xs = _by(rs, "noise")
-        fig, axes = plt.subplots(1, 2, figsize=(PAGE, 2.6), layout="constrained")
-        for ax, metric, lab in ((axes[0], "rig_change", r"rig change $\|B(\nu) - B(0)\| / \|B(0)\|$"),
-                                (axes[1], "heldout_error", "held-out relative error")):
-            ax.set_title(lab)
-            lab = "rig change" if metric == "rig_change" else "held-out error"
-            m, s = _mean_std(rs, metric, "noise", xs)
-            ax.errorbar(xs, m, yerr=s, fmt="o-", ms=4, capsize=3)
-            ax.set_xlabel(unit(r"initial-weight noise $\nu$, uniform in $[-\nu, \nu]$", DIMENSIONLESS))
-            ax.set_ylabel(unit(lab, DIMENSIONLESS))
-        n_seeds = len(_by(rs, "noise_seed"))
-        fig.suptitle(f"robustness to the initial weights ({rs[0]['problem']} face; mean and std over "
-                     f"{n_seeds} noise seeds)")
-        paths += save(fig, out / "noise_robustness", formats)
-    rs = _rows(rows, "methods")
-    if rs:
-        methods = list(dict.fromkeys(r["method"] for r in rs))
-        table = []
-        for mth in methods:
-            sel = [r for r in rs if r["method"] == mth]
-            he = [r["heldout_error"] for r in sel]
-            se = [r["shape_error"] for r in sel if r["shape_error"] is not None]
-            secs = [r["seconds"] for r in sel]
-            several = len(sel) > 1  # no std of one seed
-            table.append((mth, float(np.mean(he)), float(np.std(he)) if several else "", float(np.mean(secs)),
-                          float(np.std(secs)) if several else "", float(np.mean(se)) if se else "", len(sel)))
-        header = ("method", "held-out error (mean)", "held-out error (std over seeds)", "seconds (mean)",
-                  "seconds (std)", "median shape error vs truth", "seeds")
-        paths += write_table(out, "methods", header, table)
-        n = max(t[6] for t in table)
-        fig, axes = plt.subplots(1, 2, figsize=(PAGE, 2.5), layout="constrained", sharey=True)
-        ys = np.arange(len(table))
-        for ax, mcol, scol, color, lab in ((axes[0], 1, 2, "tab:blue", unit("held-out relative error", DIMENSIONLESS)),
-                                           (axes[1], 3, 4, "tab:gray", unit("time, single thread", "s"))):
-            vals = [t[mcol] for t in table]
-            errs = [t[scol] or 0.0 for t in table] if n > 1 else None
-            ax.barh(ys, vals, xerr=errs, color=color, capsize=3)
-            ax.set_xlim(0, 1.45 * max(v + (e or 0) for v, e in zip(vals, errs or [0] * len(vals))))
-            _bar_labels(ax, ys, vals, errs)
-            ax.set_xlabel(lab)
-        axes[0].set_yticks(ys, [t[0] for t in table])
-        axes[0].set_ylabel("method")
-        axes[0].invert_yaxis()
-        seeds = f"mean ± std over {n} seeds" if n > 1 else "n = 1 seed, no error bars"
-        fig.suptitle(f"methods on the {rs[0]['problem']} face ({seeds})")
-        paths += save(fig, out / "methods", formats)
+    return paths
+
+
+def _grid_heatmap(plt, rows, rs, out, formats) -> list[Path]:
+    """The held-out error over the alpha x lambda grid (rows ``rs`` of the grid study)."""
+    from .figures import COLUMN, DIMENSIONLESS, unit
+
+    paths: list[Path] = []
+    A, L = _by(rs, "alpha0"), _by(rs, "lam0")
+    H = np.full((len(A), len(L)), np.nan)
+    for i, a in enumerate(A):
+        for j, v in enumerate(L):
+            xs = [r["heldout_error"] for r in rs if r["alpha0"] == a and r["lam0"] == v]
+            H[i, j] = np.mean(xs) if xs else np.nan
+    fig, ax = plt.subplots(figsize=(COLUMN, 3.0), layout="constrained")
+    im = ax.imshow(H, origin="lower", cmap="viridis", aspect="auto")
+    ax.set_xticks(range(len(L)), [f"{v:.3g}" for v in L])
+    ax.set_yticks(range(len(A)), [f"{a:.2g}" for a in A])
+    mid = np.nanmean([np.nanmin(H), np.nanmax(H)])
+    for i in range(len(A)):
+        for j in range(len(L)):
+            ax.text(j, i, f"{H[i, j]:.3f}", ha="center", va="center", fontsize=8,
+                    color="w" if H[i, j] < mid else "k")
+    ax.set_xlabel(unit(r"$\lambda$", "cm²"))
+    ax.set_ylabel(unit(r"$\alpha$", DIMENSIONLESS))
+    n_seeds = len(_by(rs, "seed"))
+    ax.set_title(f"held-out error over α × λ ({rs[0]['problem']} face, " +
+                 (f"mean of {n_seeds} seeds)" if n_seeds > 1 else "n = 1 seed)"))
+    fig.colorbar(im, ax=ax).set_label(unit("held-out relative error", DIMENSIONLESS))
+    paths += save(fig, out / "alpha_lambda_heatmap", formats)
+    return paths
+
+
+def _noise_figure(plt, rows, rs, out, formats) -> list[Path]:
+    """Rig change and held-out error against the initial-weight noise (rows ``rs`` of the noise study)."""
+    from .figures import DIMENSIONLESS, PAGE, unit
+
+    paths: list[Path] = []
+    xs = _by(rs, "noise")
+    fig, axes = plt.subplots(1, 2, figsize=(PAGE, 2.6), layout="constrained")
+    for ax, metric, lab in ((axes[0], "rig_change", r"rig change $\|B(\nu) - B(0)\| / \|B(0)\|$"),
+                            (axes[1], "heldout_error", "held-out relative error")):
+        ax.set_title(lab)
+        lab = "rig change" if metric == "rig_change" else "held-out error"
+        m, s = _mean_std(rs, metric, "noise", xs)
+        ax.errorbar(xs, m, yerr=s, fmt="o-", ms=4, capsize=3)
+        ax.set_xlabel(unit(r"initial-weight noise $\nu$, uniform in $[-\nu, \nu]$", DIMENSIONLESS))
+        ax.set_ylabel(unit(lab, DIMENSIONLESS))
+    n_seeds = len(_by(rs, "noise_seed"))
+    fig.suptitle(f"robustness to the initial weights ({rs[0]['problem']} face; mean and std over "
+                 f"{n_seeds} noise seeds)")
+    paths += save(fig, out / "noise_robustness", formats)
+    return paths
+
+
+def _methods_report(plt, rows, rs, out, formats) -> list[Path]:
+    """The methods table (mean and std over seeds) and its bar figure (rows ``rs`` of the methods study)."""
+    from .figures import DIMENSIONLESS, PAGE, unit
+
+    paths: list[Path] = []
+    methods = list(dict.fromkeys(r["method"] for r in rs))
+    table = []
+    for mth in methods:
+        sel = [r for r in rs if r["method"] == mth]
+        he = [r["heldout_error"] for r in sel]
+        se = [r["shape_error"] for r in sel if r["shape_error"] is not None]
+        secs = [r["seconds"] for r in sel]
+        several = len(sel) > 1  # no std of one seed
+        table.append((mth, float(np.mean(he)), float(np.std(he)) if several else "", float(np.mean(secs)),
+                      float(np.std(secs)) if several else "", float(np.mean(se)) if se else "", len(sel)))
+    header = ("method", "held-out error (mean)", "held-out error (std over seeds)", "seconds (mean)",
+              "seconds (std)", "median shape error vs truth", "seeds")
+    paths += write_table(out, "methods", header, table)
+    n = max(t[6] for t in table)
+    fig, axes = plt.subplots(1, 2, figsize=(PAGE, 2.5), layout="constrained", sharey=True)
+    ys = np.arange(len(table))
+    for ax, mcol, scol, color, lab in ((axes[0], 1, 2, "tab:blue", unit("held-out relative error", DIMENSIONLESS)),
+                                       (axes[1], 3, 4, "tab:gray", unit("time, single thread", "s"))):
+        vals = [t[mcol] for t in table]
+        errs = [t[scol] or 0.0 for t in table] if n > 1 else None
+        ax.barh(ys, vals, xerr=errs, color=color, capsize=3)
+        ax.set_xlim(0, 1.45 * max(v + (e or 0) for v, e in zip(vals, errs or [0] * len(vals))))
+        _bar_labels(ax, ys, vals, errs)
+        ax.set_xlabel(lab)
+    axes[0].set_yticks(ys, [t[0] for t in table])
+    axes[0].set_ylabel("method")
+    axes[0].invert_yaxis()
+    seeds = f"mean ± std over {n} seeds" if n > 1 else "n = 1 seed, no error bars"
+    fig.suptitle(f"methods on the {rs[0]['problem']} face ({seeds})")
+    paths += save(fig, out / "methods", formats)
     return paths
 
 

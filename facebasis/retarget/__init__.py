@@ -13,7 +13,8 @@ head pose.
 Modules
 -------
 rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
-warp2d     vectorised piecewise-affine warp of a cartoon image (:class:`CartoonAnimator`)
+warp2d     a cartoon image animated by the capture (:class:`CartoonAnimator`)
+raster2d   the vectorised piecewise-affine image warp (scanline rasteriser, ``cv2.remap``)
 foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)

@@ -175,40 +175,12 @@ class CompactMotion:
     singular_values: np.ndarray
 
 
-def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MAX_BASIS,
-                             seed: int = 0) -> CompactMotion:
-    """PCA of the per-frame displacements ``frames - rest`` with the fewest components r whose
-    reconstruction keeps every vertex of every frame within ``tolerance`` (source unit), at most
-    ``max_basis`` (then the error reached is reported in ``max_error``).
-
-    The basis is the right singular vectors of the centred displacement matrix X (T, 3n), float32
-    (exact SVD through the T x T Gram matrix for T <= 256, else a seeded randomized range finder
-    with one power iteration, Halko et al. 2011, alg. 4.3-4.4, and the small factor's singular
-    vectors from its k x k Gram matrix); coefficients are the exact projections
-    ``(X - mean) V_r^T``, so the reported error is the error of the written animation (float32
-    storage aside). r is found by bisection on the largest vertex error measured on a subset of
-    frames (every 8th and the 64 with the most residual energy ``|X_f|^2 - |C_f,:r|^2``), which can
-    only under-estimate it, then checked on every frame (bisection on all frames above it if the
-    check fails), so r is the smallest for which the error over all frames meets the bound.
-
-    Parameters
-    ----------
-    rest : (n, 3); frames : (T, n, 3); tolerance : > 0, source unit
-    """
-    rest = np.asarray(rest, np.float64)
-    P = np.asarray(frames)
-    if P.ndim != 3 or P.shape[1:] != rest.shape:
-        raise InputError(f"vertex animation: expected frames (T, {len(rest)}, 3), found {P.shape}")
-    if not np.isfinite(P).all():
-        raise InputError("vertex animation: expected finite frames, found NaN/inf")
-    if not tolerance > 0:
-        raise InputError(f"vertex animation: expected a tolerance > 0, found {tolerance}")
-    T, n = P.shape[:2]
-    X = (np.asarray(P, np.float32) - rest.astype(np.float32)).reshape(T, -1)
-    mean = X.mean(0, dtype=np.float64).astype(np.float32)
-    Xc = X - mean
-    del X
-    cap = int(min(max_basis, T, 3 * n))
+def _motion_basis(Xc: np.ndarray, cap: int, seed: int):
+    """Right singular vectors (R, 3n) float32 (R <= cap, numerically nonzero ones only) and the
+    singular values of the centred displacements ``Xc`` (T, 3n) float32: exact through the T x T
+    Gram matrix for T <= 256, else a seeded randomized range finder with one power iteration
+    (Halko et al. 2011, alg. 4.3-4.4) and the small factor's k x k Gram matrix."""
+    T = len(Xc)
     if T <= 256:
         ev, U = np.linalg.eigh((Xc @ Xc.T).astype(np.float64))
         order = np.argsort(ev)[::-1]
@@ -228,8 +200,16 @@ def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MA
         sv = np.sqrt(np.maximum(ev[order], 0.0))
         keep = sv > (sv[0] * 1e-6 if len(sv) and sv[0] > 0 else np.inf)
         Vt = (W[:, order[keep]].T.astype(np.float32) @ B) / sv[keep, None].astype(np.float32)
-    Vt = np.ascontiguousarray(Vt, dtype=np.float32)
-    C = Xc @ Vt.T  # (T, R) exact projections
+    return np.ascontiguousarray(Vt, dtype=np.float32), sv
+
+
+def _smallest_rank(Xc: np.ndarray, Vt: np.ndarray, C: np.ndarray, n: int, tolerance: float) -> int:
+    """The fewest leading components r of the basis ``Vt`` (R, 3n) whose reconstruction
+    ``C[:, :r] Vt[:r]`` keeps every vertex of every frame of ``Xc`` (T, 3n) within ``tolerance``
+    (R when none does): bisection on a subset of frames (every 8th and the 64 with the most residual
+    energy), then on every frame above it if the full check fails (see
+    :func:`compact_vertex_animation`)."""
+    T = len(Xc)
     energy = np.einsum("ij,ij->i", Xc, Xc, dtype=np.float64)
     cum = np.cumsum(np.square(C, dtype=np.float64), axis=1)
 
@@ -266,7 +246,46 @@ def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MA
                     hi, err_hi = mid, e
                 else:
                     lo = mid
-        r, err = hi, err_hi
+        r = hi
+    return r
+
+
+def compact_vertex_animation(rest, frames, tolerance: float, max_basis: int = MAX_BASIS,
+                             seed: int = 0) -> CompactMotion:
+    """PCA of the per-frame displacements ``frames - rest`` with the fewest components r whose
+    reconstruction keeps every vertex of every frame within ``tolerance`` (source unit), at most
+    ``max_basis`` (then the error reached is reported in ``max_error``).
+
+    The basis is the right singular vectors of the centred displacement matrix X (T, 3n), float32
+    (exact SVD through the T x T Gram matrix for T <= 256, else a seeded randomized range finder
+    with one power iteration, Halko et al. 2011, alg. 4.3-4.4, and the small factor's singular
+    vectors from its k x k Gram matrix); coefficients are the exact projections
+    ``(X - mean) V_r^T``, so the reported error is the error of the written animation (float32
+    storage aside). r is found by bisection on the largest vertex error measured on a subset of
+    frames (every 8th and the 64 with the most residual energy ``|X_f|^2 - |C_f,:r|^2``), which can
+    only under-estimate it, then checked on every frame (bisection on all frames above it if the
+    check fails), so r is the smallest for which the error over all frames meets the bound.
+
+    Parameters
+    ----------
+    rest : (n, 3); frames : (T, n, 3); tolerance : > 0, source unit
+    """
+    rest = np.asarray(rest, np.float64)
+    P = np.asarray(frames)
+    if P.ndim != 3 or P.shape[1:] != rest.shape:
+        raise InputError(f"vertex animation: expected frames (T, {len(rest)}, 3), found {P.shape}")
+    if not np.isfinite(P).all():
+        raise InputError("vertex animation: expected finite frames, found NaN/inf")
+    if not tolerance > 0:
+        raise InputError(f"vertex animation: expected a tolerance > 0, found {tolerance}")
+    T, n = P.shape[:2]
+    X = (np.asarray(P, np.float32) - rest.astype(np.float32)).reshape(T, -1)
+    mean = X.mean(0, dtype=np.float64).astype(np.float32)
+    Xc = X - mean
+    del X
+    Vt, sv = _motion_basis(Xc, int(min(max_basis, T, 3 * n)), seed)
+    C = Xc @ Vt.T  # (T, R) exact projections
+    r = _smallest_rank(Xc, Vt, C, n, tolerance)
     C, B = C[:, :r].astype(np.float64), Vt[:r].astype(np.float64).reshape(r, n, 3)
     base = rest + mean.astype(np.float64).reshape(n, 3)
     err = 0.0  # the error reported: of the written basis, in float64, on every frame

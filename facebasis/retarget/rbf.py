@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.mesh import unique_edges
 
 
 def _points(a, name: str, dim: int | None = None) -> np.ndarray:
@@ -121,9 +122,7 @@ def fit_rbf(source, target, c: float | None = None, smoothing: float = 0.0) -> R
 def mean_edge_length(V, F) -> float:
     """Mean length of the unique edges of a triangle mesh V (n, d), F (m, 3) (eq. 13's averages)."""
     V = np.asarray(V, np.float64)
-    F = np.asarray(F, np.int64)
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    E = np.unique(E, axis=0)
+    E = unique_edges(F)
     if len(E) == 0:
         raise InputError("mean edge length: expected a mesh with triangles, found none")
     return float(np.mean(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)))

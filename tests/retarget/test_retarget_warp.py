@@ -6,7 +6,8 @@ from scipy.spatial import Delaunay
 
 from facebasis.defaults.cartoon import default_cartoon
 from facebasis.errors import InputError
-from facebasis.retarget.warp2d import CartoonAnimator, animate_cartoon, rasterize_maps, warp_image
+from facebasis.retarget.raster2d import rasterize_maps, warp_image
+from facebasis.retarget.warp2d import CartoonAnimator, animate_cartoon
 
 
 def _grid(x0=100, x1=400, y0=80, y1=450, n=12):

@@ -29,7 +29,7 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     P : (n, 3) x right and y down in pixels, z towards the viewer
     F : (m, 3) triangles (counter-clockwise seen from the viewer in a y-up frame)
     size : (height, width) of the image
-    color : RGB in [0, 1] of the surface; background : RGB uint8
+    color : RGB in [0, 1] of the surface, one (3,) or one per triangle (m, 3); background : RGB uint8
     out : optional (height, width, 3) uint8 array to draw into (else a new one)
 
     Returns
@@ -54,7 +54,9 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     tri, y0, y1 = tri[keep], y0[keep], y1[keep]
     n = np.cross(e1[keep], e2[keep])
     n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
-    rgb = np.clip(np.outer(0.25 + 0.75 * np.abs(n @ LIGHT), np.asarray(color, float)) * 255.0, 0, 255).astype(np.uint8)
+    col = np.asarray(color, float)
+    col = col[keep] if col.ndim == 2 else col
+    rgb = np.clip((0.25 + 0.75 * np.abs(n @ LIGHT))[:, None] * col * 255.0, 0, 255).astype(np.uint8)
     # z-buffer key: the triangle's mean depth quantised to 2^20 levels in the high bits, its index in
     # the low ones (no sort: the largest key at a pixel is the nearest triangle)
     z = tri[:, 0, 2] + tri[:, 1, 2] + tri[:, 2, 2]

@@ -25,7 +25,7 @@ import numpy as np
 from facebasis.errors import InputError
 
 DETECTORS = ("dlib", "mediapipe")
-INSTALL_HINT = "pip install 'facebasis[detect]'"
+INSTALL_HINT = "pip install 'facebasis[detect]' (from a clone: pip install '.[detect]')"
 MEDIAPIPE_INSTALL_HINT = "pip install 'facebasis[mediapipe]' (from a clone: pip install '.[mediapipe]')"
 
 #: MediaPipe face-mesh vertex for each of the 68 iBUG 300-W points (image left = the subject's right,

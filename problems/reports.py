@@ -1,4 +1,6 @@
-"""Regenerate every figure and table of ``reports/``: ``python -m problems.reports --data {default,ict}``.
+"""Regenerate the figures and tables of ``reports/default`` and ``reports/ict``:
+``python -m problems.reports --data {default,ict}`` (``python -m problems.reproduce --list`` names the
+command behind every other folder of ``reports/``).
 
 Runs, from scratch, into ``reports/<data>/``:
 

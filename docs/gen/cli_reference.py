@@ -1,6 +1,11 @@
 """Build step (mkdocs-gen-files): the command reference page, from the argparse parsers."""
 
+import sys
+from pathlib import Path
+
 import mkdocs_gen_files
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # this checkout's facebasis and problems
 
 from facebasis.cli.examples import reference_markdown
 

@@ -159,8 +159,8 @@ class MediaPipeDetector:
     ----------
     video : bool
         True (default): MediaPipe's tracking mode for consecutive frames of one video (the face is
-        detected once and then followed from the previous frame's mesh, about 3 ms per 400 x 300
-        frame); False: every call is an independent detection (single images).
+        detected once and then followed from the previous frame's mesh, much cheaper than a
+        detection); False: every call is an independent detection (single images).
 
     Raises
     ------

@@ -17,8 +17,8 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     """Flat-shaded image of a mesh already in pixel coordinates, for video frames (no OpenGL).
 
     The same shading as :func:`facebasis.report.render.draw_mesh` (``0.25 + 0.75 |n . light|``), but
-    rasterised with numpy instead of a matplotlib PolyCollection (which needs ~0.3 s for a
-    28k-triangle face): front-facing triangles are cut into pixel rows (one span per triangle and
+    rasterised with numpy instead of a matplotlib PolyCollection (slow and memory-hungry for
+    tens of thousands of triangles): front-facing triangles are cut into pixel rows (one span per triangle and
     row whose pixel centres it covers, between the long edge of the y-sorted triangle and its
     current short edge), the spans are expanded into pixels, and a z-buffer keeps the nearest triangle per pixel (``np.maximum.at`` on a key of the
     triangle's quantised mean depth and its index; flat shading needs no per-pixel depth). No

@@ -223,8 +223,8 @@ def shapes_figure(rig, path: Path, names=None, view="front", formats=("png", "pd
 
     Each panel is rasterised with numpy (:func:`facebasis.report.render.render_image`) straight
     into one image of the whole grid, one shape at a time, so memory is that image plus one
-    shape's render however many shapes there are (a matplotlib polygon collection per shape held
-    2 GB for ICT's 53 shapes); the figure shows the grid image with vector titles and colour bar.
+    shape's render however many shapes there are (not a matplotlib polygon collection per shape);
+    the figure shows the grid image with vector titles and colour bar.
 
     Parameters
     ----------

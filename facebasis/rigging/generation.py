@@ -219,7 +219,7 @@ class BlendshapeGenerator:
 
     def _prebuild_weight_solver(self, schedule) -> None:
         """Start building the CasADi model on a side thread when a run of ``schedule`` will call
-        IPOPT: CasADi releases the GIL while it builds (0.3 s on ICT), so the build overlaps the
+        IPOPT: CasADi releases the GIL while it builds, so the build overlaps the
         first alternations instead of delaying the final one."""
         if self._weight_solver is not None or self._weight_solver_future is not None:
             return

@@ -47,8 +47,9 @@ def _rel(path: Path, start: Path) -> str:
 
 #: What each file of a run report shows (for index.md).
 RUN_FILES = {
-    "convergence": "E_fit and E_reg (cm²) with the alpha schedule, the weight-step objective (certified and "
-                   "IPOPT) with the lambda schedule, and the constraint residuals, per iteration.",
+    "convergence": "E_fit and E_reg (cm²) with the alpha schedule; the weight-step objective split into the fit "
+                   "of the examples and the prior part (which scales with lambda, drawn with its schedule); the "
+                   "constraint residuals; per iteration.",
     "weights": "The solved weights of each training expression (rows) on each shape (columns), 0 to 1.",
     "residuals": "Relative residual of each training expression after the run; red above the "
                  "missing-expression threshold (dashed).",
@@ -65,11 +66,12 @@ RUN_FILES = {
 
 def _run_tables(out: Path, history: dict, weights: dict, residuals: dict) -> list[Path]:
     its = history["iterations"]
-    keys = [k for k in ("iteration", "alpha", "lam", "e_fit", "e_reg", "weight_objective", "ipopt_objective",
-                        "max_complementarity", "max_bound_violation", "ipopt_max_complementarity",
+    keys = [k for k in ("iteration", "alpha", "lam", "e_fit", "e_reg", "weight_objective", "weight_prior",
+                        "ipopt_objective", "max_complementarity", "max_bound_violation", "ipopt_max_complementarity",
                         "ipopt_max_bound_violation", "ipopt_status", "ipopt_iterations", "basis_seconds",
                         "weight_seconds") if its and k in its[0]]
     header = [{"e_fit": "E_fit (cm²)", "e_reg": "E_reg (cm²)", "weight_objective": "weight objective (cm²)",
+               "weight_prior": "of it, prior (cm²)",
                "ipopt_objective": "IPOPT objective (cm²)", "lam": "lambda (cm²)",
                "basis_seconds": "basis step (s)", "weight_seconds": "weight step (s)"}.get(k, k) for k in keys]
     paths = write_table(out, "history", header,

@@ -329,11 +329,18 @@ class BlendshapeGenerator:
                 ipopt_max_complementarity=sol.ipopt_max_complementarity,
                 ipopt_max_bound_violation=sol.ipopt_max_bound_violation, ipopt_status=sol.ipopt_status,
                 ipopt_iterations=sol.ipopt_iterations, ipopt_success=sol.ipopt_success,
-                basis_seconds=t1 - t0, weight_seconds=sol.seconds,
+                basis_seconds=t1 - t0, weight_seconds=sol.seconds, weight_prior=_prior_term(sol),
             ))
             if progress is not None:
                 progress(history[-1], len(schedule))
         return history, X, self.deltas_of(Bv)
+
+
+def _prior_term(sol) -> float:
+    """``lambda sum_j ||x_j - x~_j||^2`` of a weight step's answer (eq. 5's prior part)."""
+    P = sol.problem
+    D = np.asarray(sol.X, float) - P.prior
+    return float(np.sum(P.lam * np.einsum("jk,jk->j", D, D)))
 
 
 def _available_cores() -> int:

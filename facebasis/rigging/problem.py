@@ -233,6 +233,9 @@ class IterationRecord:
     ipopt_success: bool
     basis_seconds: float
     weight_seconds: float
+    #: the prior part of ``weight_objective``, ``lambda sum_j ||x_j - x~_j||^2`` (eq. 5's second term);
+    #: ``weight_objective - weight_prior`` is the fit of the examples, which does not scale with lambda
+    weight_prior: float = float("nan")
 
 
 @dataclass(frozen=True)

@@ -235,3 +235,21 @@ def test_face_crop_follows_the_moving_face_not_a_slightly_dragged_head():
     deltas[1, face, 2] = 1.0
     (x0, x1), (y0, y1) = figures.face_crop(V, deltas, rel=0.5)
     assert -3.6 < x0 < -2.5 and 2.5 < x1 < 3.6 and -3.6 < y0 < -2.5 and 2.5 < y1 < 3.6
+
+
+def test_history_splits_the_weight_objective_into_fit_and_prior(rig_run):
+    """history.json's weight_prior is eq. 5's prior part at the solved weights, lambda ||x - x~||^2
+    (the convergence figure draws the fit, objective - prior, which does not scale with lambda)."""
+    import json
+
+    history = json.loads((rig_run / "history.json").read_text())
+    weights = json.loads((rig_run / "weights.json").read_text())
+    inputs = json.loads((rig_run / "inputs.json").read_text())
+    rough_path = Path(inputs["weights"]) if Path(inputs["weights"]).is_absolute() else rig_run / inputs["weights"]
+    rough = json.loads(rough_path.read_text())
+    last = history["iterations"][-1]
+    x = np.array([[weights[e].get(s, 0.0) for s in history["shapes"]] for e in history["examples"]])
+    xt = np.array([[rough[e].get(s, 0.0) for s in history["shapes"]] for e in history["examples"]])
+    assert last["weight_prior"] == pytest.approx(last["lam"] * float(((x - xt) ** 2).sum()), rel=1e-6)
+    for h in history["iterations"]:
+        assert 0.0 <= h["weight_prior"] <= h["weight_objective"]

@@ -171,19 +171,21 @@ def lint_figure(fig) -> list[str]:
 
 def face_crop(V, deltas=None, view="front", pad=0.04, rel=0.2):
     """A crop ((x0, x1), (y0, y1)) in view coordinates around the part of a mesh that moves: the
-    vertices that move by more than ``rel`` of their shape's own maximum in some shape (all
-    vertices without ``deltas`` or when none moves), from the 0.5th to the 99.5th percentile of
-    their view coordinates (a shape that drags the neck along does not widen the crop to the
-    whole head), padded by ``pad`` of the larger side."""
+    vertices that move by more than ``rel`` of their shape's own maximum in some shape, at rest and
+    where that shape takes them (an opened jaw stays in the frame; all vertices without ``deltas``
+    or when none moves), from the 0.5th to the 99.5th percentile of their view coordinates (a shape
+    that drags the neck along does not widen the crop to the whole head), padded by ``pad`` of the
+    larger side."""
     V = np.asarray(V, float)
-    keep = np.ones(len(V), bool)
+    pts = V
     if deltas is not None and len(deltas):
-        mag = np.linalg.norm(np.asarray(deltas, float), axis=2)
+        D = np.asarray(deltas, float)
+        mag = np.linalg.norm(D, axis=2)
         peak = mag.max(1, keepdims=True)
-        moving = (mag > rel * np.where(peak > 0, peak, np.inf)).any(0)
-        if moving.sum() >= 3:
-            keep = moving
-    P = project(V[keep], view)[:, :2]
+        moving = mag > rel * np.where(peak > 0, peak, np.inf)          # (k, n)
+        if moving.any(0).sum() >= 3:  # the moving vertices at rest and where their shapes take them
+            pts = np.concatenate([V[moving.any(0)], (V[None] + D)[moving]])
+    P = project(pts, view)[:, :2]
     lo, hi = np.percentile(P, 0.5, axis=0), np.percentile(P, 99.5, axis=0)
     m = pad * float((hi - lo).max())
     return ((lo[0] - m, hi[0] + m), (lo[1] - m, hi[1] + m))

@@ -191,9 +191,10 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0", help="problem seeds of the studies (default 0)")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--scheduler", default=None)
-    parser.add_argument("--only", choices=("penetration", "run"), default=None,
+    parser.add_argument("--only", choices=("penetration", "run", "figures"), default=None,
                         help="regenerate only this part (penetration: the counts and close-ups, no studies; "
-                             "run: the example-based run and its report)")
+                             "run: the example-based run and its report; figures: the study figures and "
+                             "tables redrawn from the stored results.csv, nothing solved)")
     args = parser.parse_args(argv)
     if args.data == "ict":
         from problems.ict import ict_available, ict_path
@@ -212,6 +213,10 @@ def main(argv=None) -> int:
     from facebasis.report.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
 
     seeds = tuple(int(s) for s in args.seeds.split(","))
+    if args.only == "figures":
+        sweep_report(read_table(out / "results.csv"), out)
+        print(f"{_shown(out)}: study figures redrawn from results.csv in {time.perf_counter() - t0:.0f} s")
+        return 0
     if args.only == "run":
         _report_of_a_run(args.data, seeds[0], out, person_problem, report_run)
         print(f"{_shown(out)}: run and its report regenerated ({args.data} data) in {time.perf_counter() - t0:.0f} s")

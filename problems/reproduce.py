@@ -169,14 +169,23 @@ RECIPES: tuple[Recipe, ...] = (
 )
 
 #: files written by hand (analyses quoting the tables); listed, never regenerated
-NOTES = ("README.md", "*/README.md", "reproduction/real_clips_notes.md", "retarget/plausibility.md",
+NOTES = ("README.md", "*/README.md", "notes.md", "reproduction/real_clips_notes.md", "retarget/plausibility.md",
          "cv_speed/summary.md", "examples_study/cv_fix.md", "examples_study/grid_edge.md")
 
 
 def report_files(root: Path = REPORTS) -> list[str]:
-    """Every file under ``root`` (posix paths relative to it), hidden files and renders left out."""
-    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
-                  if p.is_file() and not any(part.startswith(".") for part in p.relative_to(root).parts))
+    """Every file under ``root`` that belongs in the repository (posix paths relative to it): in a git
+    checkout, the tracked files and the new ones git does not ignore (run folders and renders of
+    the ICT face or the clips are ignored: they are written locally only); elsewhere every file.
+    Hidden files are left out."""
+    root = Path(root)
+    try:
+        listed = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z", "."],
+                                cwd=root, capture_output=True, check=True).stdout.decode().split("\0")
+        names = [n for n in listed if n and (root / n).is_file()]
+    except (OSError, subprocess.CalledProcessError):
+        names = [p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()]
+    return sorted(set(n for n in names if not any(part.startswith(".") for part in n.split("/"))))
 
 
 def _matches(path: str, pattern: str) -> bool:

@@ -40,7 +40,7 @@ EXAMPLES: dict[str, tuple[tuple[str, str], ...]] = {
          "example-based generation from the demo's training expressions and rough weights"),
         (f"facebasis rig --template {DEMO}/template --target {DEMO}/person_neutral.obj "
          f"--examples {DEMO}/rig_inputs/examples --weights {DEMO}/rig_inputs/weights.json --alpha auto "
-         "--ipopt every --out my_rig_cv", "alpha chosen by cross-validation, IPOPT as the solver at every step"),
+         "--ipopt every --out my_rig_cv", "alpha chosen by cross-validation, IPOPT run at every step (its answer seeds the certified solver)"),
         ("facebasis rig --resume my_rig --examples more/ --weights more.json --out my_rig2",
          "add training expressions to a finished run"),
     ),

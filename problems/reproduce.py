@@ -84,6 +84,9 @@ RECIPES: tuple[Recipe, ...] = (
            data=("video", "detect"), script="problems/bench_capture_gt.py",
            archived="made by `python -m problems.bench_capture_gt` on the code before drift correction "
                     "(the parent of commit 22a017b); check that commit out to make it again"),
+    Recipe("capture-real", "Tracking the shared clips against per-frame dlib: plain LK, tracking only, each "
+           "detector fed to the filter, MediaPipe alone", ("capture/real_clips.csv",),
+           (f"{PY} problems.bench_capture_real",), data=("video", "detect"), script="problems/bench_capture_real.py"),
     Recipe("capture-synthetic", "Capture accuracy per stage on generated sequences with exact landmarks, drift "
            "over a long take", ("capture/accuracy.csv", "capture/drift.png", "capture/drift.pdf"),
            (f"{PY} problems.bench_capture",), data=("video",), script="problems/bench_capture.py"),

@@ -230,9 +230,9 @@ class CertifiedWeightSolver:
     Two correlated shapes that may not be on together (pair (0, 1)); the optimum keeps shape 1:
 
     >>> import numpy as np
-    >>> G = np.array([[1.0, 0.5], [0.5, 4.0]])              # B^T B (k, k)
-    >>> solver = CertifiedWeightSolver(G, [(0, 1)], lam=0.0)
-    >>> sol = solver.solve(np.array([1.0, 2.1]), 0.0)       # c = B^T (t - b0) (k,), const = |t - b0|^2
+    >>> from facebasis.rigging.weightproblem import WeightProblem
+    >>> G, c = np.array([[1.0, 0.5], [0.5, 4.0]]), np.array([1.0, 2.1])   # B^T B (k, k), B^T (t - b0) (k,)
+    >>> sol = CertifiedWeightSolver(WeightProblem(G, c, 0.0, [(0, 1)])).solve_example(0)
     >>> np.round(sol.x, 3).tolist(), round(sol.objective, 4), sol.certified
     ([0.0, 0.525], -1.1025, True)
     """

@@ -186,7 +186,7 @@ def reference_markdown(parser: argparse.ArgumentParser | None = None) -> str:
     return "\n".join(out)
 
 
-def _with_width(fmt, columns: int = 100) -> str:
+def _with_width(fmt, columns: int = 88) -> str:
     """``fmt()`` at a fixed terminal width (the page does not depend on the builder's terminal)."""
     import os
 

@@ -36,7 +36,7 @@ def check_json_text(text: str, label: str, expected: str) -> None:
 
     Strings are blanked first (a bracket or digit inside a string does not count); the depth is a
     cumulative sum over the bracket characters and the digit runs are measured with numpy
-    (0.2 s for 20 MB).
+    (no Python loop over characters).
 
     Raises
     ------

@@ -1,4 +1,6 @@
-"""Regenerate every figure and table of ``reports/``: ``python -m problems.reports --data {default,ict}``.
+"""Regenerate the figures and tables of ``reports/default`` and ``reports/ict``:
+``python -m problems.reports --data {default,ict}`` (``python -m problems.reproduce --list`` names the
+command behind every other folder of ``reports/``).
 
 Runs, from scratch, into ``reports/<data>/``:
 
@@ -163,6 +165,17 @@ def _penetration(data: str, out: Path) -> list[Path]:
     return paths
 
 
+def _report_of_a_run(data: str, seed: int, out: Path, person_problem, report_run):
+    """One example-based run with default options, written like ``facebasis rig``, and its report."""
+    print("run: example-based generation, default options")
+    pp = person_problem(data, seed)
+    run, generated = _run_folder(pp, out)
+    # ICT renders (faces) go to reports/ict/renders/ (not committed, see .gitignore) and stay out of
+    # the committed index; the built-in face's renders are part of the report
+    report_run(run, out / "run_report", renders_dir=out / "renders" if data == "ict" else None)
+    return pp, generated
+
+
 def _shown(path: Path) -> str:
     """``path`` relative to the working folder when inside it, else as given."""
     try:
@@ -178,8 +191,10 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0", help="problem seeds of the studies (default 0)")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--scheduler", default=None)
-    parser.add_argument("--only", choices=("penetration",), default=None,
-                        help="regenerate only this part (penetration: the counts and close-ups, no studies)")
+    parser.add_argument("--only", choices=("penetration", "run", "figures"), default=None,
+                        help="regenerate only this part (penetration: the counts and close-ups, no studies; "
+                             "run: the example-based run and its report; figures: the study figures and "
+                             "tables redrawn from the stored results.csv, nothing solved)")
     args = parser.parse_args(argv)
     if args.data == "ict":
         from problems.ict import ict_available, ict_path
@@ -198,17 +213,20 @@ def main(argv=None) -> int:
     from facebasis.report.studies import STUDIES, person_problem, read_table, run_tasks, study_tasks, write_table
 
     seeds = tuple(int(s) for s in args.seeds.split(","))
+    if args.only == "figures":
+        sweep_report(read_table(out / "results.csv"), out)
+        print(f"{_shown(out)}: study figures redrawn from results.csv in {time.perf_counter() - t0:.0f} s")
+        return 0
+    if args.only == "run":
+        _report_of_a_run(args.data, seeds[0], out, person_problem, report_run)
+        print(f"{_shown(out)}: run and its report regenerated ({args.data} data) in {time.perf_counter() - t0:.0f} s")
+        return 0
     tasks = [t for st in STUDIES for t in study_tasks(st, args.data, seeds)]
     print(f"studies: {len(tasks)} tasks on {args.scheduler or 'a local Dask cluster'}")
     rows = run_tasks(tasks, scheduler=args.scheduler, workers=args.workers)
     write_table(rows, out / "results.csv")
     sweep_report(read_table(out / "results.csv"), out)
-    print("run: example-based generation, default options")
-    pp = person_problem(args.data, seeds[0])
-    run, generated = _run_folder(pp, out)
-    # ICT renders (faces) go to reports/ict/renders/ (not committed, see .gitignore) and stay out of
-    # the committed index; the built-in face's renders are part of the report
-    report_run(run, out / "run_report", renders_dir=out / "renders" if args.data == "ict" else None)
+    pp, generated = _report_of_a_run(args.data, seeds[0], out, person_problem, report_run)
     _error_maps(pp, generated, out, args.data)
     print("formulations: weight-step suite")
     from facebasis.rigging.formulations import compare_formulations

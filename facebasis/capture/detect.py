@@ -25,7 +25,7 @@ import numpy as np
 from facebasis.errors import InputError
 
 DETECTORS = ("dlib", "mediapipe")
-INSTALL_HINT = "pip install 'facebasis[detect]'"
+INSTALL_HINT = "pip install 'facebasis[detect]' (from a clone: pip install '.[detect]')"
 MEDIAPIPE_INSTALL_HINT = "pip install 'facebasis[mediapipe]' (from a clone: pip install '.[mediapipe]')"
 
 #: MediaPipe face-mesh vertex for each of the 68 iBUG 300-W points (image left = the subject's right,
@@ -159,8 +159,8 @@ class MediaPipeDetector:
     ----------
     video : bool
         True (default): MediaPipe's tracking mode for consecutive frames of one video (the face is
-        detected once and then followed from the previous frame's mesh, about 3 ms per 400 x 300
-        frame); False: every call is an independent detection (single images).
+        detected once and then followed from the previous frame's mesh, much cheaper than a
+        detection); False: every call is an independent detection (single images).
 
     Raises
     ------

@@ -56,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
         command = sub.choices[action.dest]
         if command.description is None:
             command.description = action.help[:1].upper() + action.help[1:] + "."
+    from .examples import apply_examples
+
+    apply_examples(parser)  # every --help page ends with examples (facebasis.cli.examples.EXAMPLES)
     return parser
 
 

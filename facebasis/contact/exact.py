@@ -71,7 +71,7 @@ def check_size(n_vertices: int, max_vertices: int | None = None, what: str = "co
     max_vertices = MAX_VERTICES if max_vertices is None else int(max_vertices)
     if n_vertices > max_vertices:
         raise InputError(f"{what}: expected a mesh of at most {max_vertices} vertices for the time budget (ICT's "
-                         f"14062 take ~46 s CPU for 52 shapes without mouthClose, on all cores), found {n_vertices}; "
+                         f"14062 vertices are within it; reports/contact/contact.md has their time), found {n_vertices}; "
                          + ("run without --contact" if what.startswith("--") else
                             "pass max_vertices= to allow more, or go without contact"))
 

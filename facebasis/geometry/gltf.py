@@ -26,8 +26,8 @@ engines); default weights are 0.
 **Writer.** The package's own buffer builder (:class:`GltfBuffer`), not pygltflib (a test
 dependency that reads the files back in the tests): on the 53-shape ICT rig the two write the same
 binary buffer (sizes within a few hundred bytes of JSON), but pygltflib's dataclass-to-JSON
-serialisation and its per-accessor objects make it several times slower (measured with
-``python -m problems.bench_gltf``; README), and the builder adds no run-time dependency.
+serialisation and its per-accessor objects make it slower (``python -m problems.bench_gltf``
+compares them), and the builder adds no run-time dependency.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ point is too far, lies on a rim of a hole, or whose normal disagrees with the sc
 
 The stiffness term differs from eq. 3-7. Amberg et al. give each vertex an affine 3x4 transform and
 penalise the difference of neighbouring transforms, ``||(M (x) G) X||^2`` (eq. 7): 4n unknowns, and
-a 56k x 56k factorisation takes 1.4 s here for the 14k-vertex ICT face, once per stiffness level.
+a 56k x 56k factorisation for the 14k-vertex ICT face, once per stiffness level.
 We keep one unknown position per vertex and make the stiffness term rotation-aware instead, as in
 as-rigid-as-possible modelling (Sorkine & Alexa 2007) and Sumner-style embedded deformation with the
 mesh as its own graph: ``E_s = sum_(i,j) ||(x_i - x_j) - R_ij (p_i - p_j)||^2`` with ``p`` the rest
@@ -21,7 +21,7 @@ mesh as its own graph: ``E_s = sum_(i,j) ||(x_i - x_j) - R_ij (p_i - p_j)||^2`` 
 per vertex by one batched 3x3 SVD). Like eq. 7 it leaves local rotations free, so a jaw opening
 or a turned head costs nothing, but the normal matrix of eq. 11-12,
 ``A^T A = alpha^2 L + W^2 + beta^2 S_l^T S_l``, is n x n (L the graph Laplacian ``M^T M`` of
-eq. 6's node-arc incidence matrix ``M``) and shared by x, y and z: about 0.2 s to factor. The
+eq. 6's node-arc incidence matrix ``M``) and shared by x, y and z: a quarter of the unknowns. The
 weights ``W`` are fixed per stiffness level, so each level factors once and every inner
 iteration is a back-substitution.
 

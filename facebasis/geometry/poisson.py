@@ -101,7 +101,7 @@ class EdgePoisson:
     Building costs one sparse Cholesky factorisation (CHOLMOD, through cholespy) of the
     free-vertex block of ``L = E^T C E + w X^T X``, which is symmetric positive definite once every
     component is anchored; a solve is then a pair of triangular solves for all right-hand
-    sides at once (3x faster than SuperLU's LU solve on the ICT mesh with 159 right-hand sides).
+    sides at once (SuperLU's LU solve is the fallback where cholespy is missing).
 
     Two entry points, for two layouts of the same problem: :meth:`solve` (triangle edge targets,
     batch axes first) and :meth:`solve_frame_rows` (frame edge columns, one problem per column of

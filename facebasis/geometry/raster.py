@@ -17,8 +17,8 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     """Flat-shaded image of a mesh already in pixel coordinates, for video frames (no OpenGL).
 
     The same shading as :func:`facebasis.report.render.draw_mesh` (``0.25 + 0.75 |n . light|``), but
-    rasterised with numpy instead of a matplotlib PolyCollection (which needs ~0.3 s for a
-    28k-triangle face): front-facing triangles are cut into pixel rows (one span per triangle and
+    rasterised with numpy instead of a matplotlib PolyCollection (slow and memory-hungry for
+    tens of thousands of triangles): front-facing triangles are cut into pixel rows (one span per triangle and
     row whose pixel centres it covers, between the long edge of the y-sorted triangle and its
     current short edge), the spans are expanded into pixels, and a z-buffer keeps the nearest triangle per pixel (``np.maximum.at`` on a key of the
     triangle's quantised mean depth and its index; flat shading needs no per-pixel depth). No
@@ -29,7 +29,7 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     P : (n, 3) x right and y down in pixels, z towards the viewer
     F : (m, 3) triangles (counter-clockwise seen from the viewer in a y-up frame)
     size : (height, width) of the image
-    color : RGB in [0, 1] of the surface; background : RGB uint8
+    color : RGB in [0, 1] of the surface, one (3,) or one per triangle (m, 3); background : RGB uint8
     out : optional (height, width, 3) uint8 array to draw into (else a new one)
 
     Returns
@@ -54,7 +54,9 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     tri, y0, y1 = tri[keep], y0[keep], y1[keep]
     n = np.cross(e1[keep], e2[keep])
     n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
-    rgb = np.clip(np.outer(0.25 + 0.75 * np.abs(n @ LIGHT), np.asarray(color, float)) * 255.0, 0, 255).astype(np.uint8)
+    col = np.asarray(color, float)
+    col = col[keep] if col.ndim == 2 else col
+    rgb = np.clip((0.25 + 0.75 * np.abs(n @ LIGHT))[:, None] * col * 255.0, 0, 255).astype(np.uint8)
     # z-buffer key: the triangle's mean depth quantised to 2^20 levels in the high bits, its index in
     # the low ones (no sort: the largest key at a pixel is the nearest triangle)
     z = tri[:, 0, 2] + tri[:, 1, 2] + tri[:, 2, 2]

@@ -76,8 +76,12 @@ class DeformationTransfer:
 
     Examples
     --------
-    >>> dt = DeformationTransfer(template, target_neutral)      # doctest: +SKIP
-    >>> target_rig = dt.transfer()                               # all shapes at once
+    >>> from facebasis.defaults.face import default_person, default_template
+    >>> template = default_template()
+    >>> dt = DeformationTransfer(template, default_person().neutral)  # frames + one factorisation
+    >>> target_rig = dt.transfer()                                     # all shapes at once
+    >>> target_rig.deltas.shape == (template.n_shapes, template.n_vertices, 3)
+    True
     """
 
     def __init__(self, template: Rig, target_neutral: np.ndarray, anchors=None,

@@ -171,19 +171,21 @@ def lint_figure(fig) -> list[str]:
 
 def face_crop(V, deltas=None, view="front", pad=0.04, rel=0.2):
     """A crop ((x0, x1), (y0, y1)) in view coordinates around the part of a mesh that moves: the
-    vertices that move by more than ``rel`` of their shape's own maximum in some shape (all
-    vertices without ``deltas`` or when none moves), from the 0.5th to the 99.5th percentile of
-    their view coordinates (a shape that drags the neck along does not widen the crop to the
-    whole head), padded by ``pad`` of the larger side."""
+    vertices that move by more than ``rel`` of their shape's own maximum in some shape, at rest and
+    where that shape takes them (an opened jaw stays in the frame; all vertices without ``deltas``
+    or when none moves), from the 0.5th to the 99.5th percentile of their view coordinates (a shape
+    that drags the neck along does not widen the crop to the whole head), padded by ``pad`` of the
+    larger side."""
     V = np.asarray(V, float)
-    keep = np.ones(len(V), bool)
+    pts = V
     if deltas is not None and len(deltas):
-        mag = np.linalg.norm(np.asarray(deltas, float), axis=2)
+        D = np.asarray(deltas, float)
+        mag = np.linalg.norm(D, axis=2)
         peak = mag.max(1, keepdims=True)
-        moving = (mag > rel * np.where(peak > 0, peak, np.inf)).any(0)
-        if moving.sum() >= 3:
-            keep = moving
-    P = project(V[keep], view)[:, :2]
+        moving = mag > rel * np.where(peak > 0, peak, np.inf)          # (k, n)
+        if moving.any(0).sum() >= 3:  # the moving vertices at rest and where their shapes take them
+            pts = np.concatenate([V[moving.any(0)], (V[None] + D)[moving]])
+    P = project(pts, view)[:, :2]
     lo, hi = np.percentile(P, 0.5, axis=0), np.percentile(P, 99.5, axis=0)
     m = pad * float((hi - lo).max())
     return ((lo[0] - m, hi[0] + m), (lo[1] - m, hi[1] + m))
@@ -237,8 +239,10 @@ def demo_figures(folder: Path, template, person, results: dict) -> list[Path]:
 
 def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path]:
     """Convergence of a rig run, three panels stacked for a column: E_fit and E_reg with the alpha
-    schedule; the weight objective (certified and IPOPT) with the lambda schedule; the constraint
-    residuals. Reads ``history.json`` content."""
+    schedule; the weight step's objective split into its fit of the examples and its prior part
+    (which scales with lambda, drawn with the lambda schedule; the total as well, and IPOPT's total
+    where it ran); the constraint residuals. Reads ``history.json`` content (a history without
+    ``weight_prior`` shows the total only)."""
     plt = _pyplot()
     its = history["iterations"]
     i = np.array([h["iteration"] for h in its])
@@ -255,10 +259,21 @@ def convergence_figure(history: dict, path: Path, formats=("png",)) -> list[Path
     legend_outside(ax, h1 + h2 + h3, [h.get_label() for h in h1 + h2 + h3], where="above", ncol=2)
     ax = axes[1]
     # the two curves coincide when IPOPT reaches the optimum: large open circles under small crosses
-    h1 = ax.semilogy(i, [h["weight_objective"] for h in its], "o-", ms=7, mfc="none", label="certified (B&B)")
+    total = np.array([h["weight_objective"] for h in its], float)
+    prior = np.array([h.get("weight_prior", np.nan) for h in its], float)
     ipopt = np.array([h["ipopt_objective"] for h in its], float)
-    h2 = ax.semilogy(i, ipopt, "x--", ms=5, label=f"IPOPT ({int(np.isfinite(ipopt).sum())} of {len(i)} iter.)")
-    ax.set_ylabel(unit("eq. 5 objective", "cm²"))
+    if np.isfinite(prior).all():
+        # the objective's prior part scales with lambda; its fit part (eq. 5's first term) is what the
+        # alternation improves, so it is drawn apart (the total then mostly traces lambda's schedule)
+        h1 = ax.semilogy(i, total - prior, "o-", ms=7, mfc="none", label="fit of the examples (certified)")
+        h1 += ax.semilogy(i, np.maximum(prior, 1e-300), "s:", ms=4, color="tab:green",
+                          label=r"prior $\lambda\|x - \tilde x\|^2$")
+        h1 += ax.semilogy(i, total, "-", lw=0.8, color="0.6", label="total (fit + prior)")
+        ax.set_ylabel(unit("eq. 5 terms", "cm²"))
+    else:  # a history written before the prior part was recorded
+        h1 = ax.semilogy(i, total, "o-", ms=7, mfc="none", label="certified (B&B)")
+        ax.set_ylabel(unit("eq. 5 objective", "cm²"))
+    h2 = ax.semilogy(i, ipopt, "x--", ms=5, label=f"IPOPT total ({int(np.isfinite(ipopt).sum())} of {len(i)} iter.)")
     ax2 = ax.twinx()
     h3 = ax2.plot(i, [h["lam"] for h in its], "k--", lw=1, label=r"$\lambda$ (right axis)")
     ax2.set_ylabel(unit(r"$\lambda$", "cm²"))

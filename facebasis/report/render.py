@@ -101,6 +101,61 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
 
 
 
+#: displacement colours for renders: skin (no motion) through orange to a dark red (the largest);
+#: the largest value stays a colour, so a strongly moving region never reads as a hole
+HEAT_COLORS = ((0.85, 0.78, 0.72), (0.98, 0.62, 0.25), (0.82, 0.16, 0.08), (0.45, 0.0, 0.12))
+
+
+def heat_cmap():
+    """The :data:`HEAT_COLORS` colour map (matplotlib)."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list("facebasis_heat", HEAT_COLORS)
+
+
+def render_image(V, F, crop, width: int, values=None, vmin=0.0, vmax=1.0, cmap=None, view="front",
+                 supersample: int = 2, background=(255, 255, 255)) -> np.ndarray:
+    """A shaded image of a mesh inside a crop, rasterised with numpy (no matplotlib polygons).
+
+    The mesh is projected with :func:`project`, the ``crop`` ((x0, x1), (y0, y1)) in view coordinates
+    fills the image, and :func:`facebasis.geometry.raster.rasterize_mesh` draws it (z-buffer, flat
+    shading as :func:`draw_mesh`, back faces culled) at ``supersample`` times the size, averaged down.
+    Memory is one image: a figure of many shapes keeps images, not polygon collections.
+
+    Parameters
+    ----------
+    V : (n, 3) vertices; F : (m, 3) triangles
+    crop : ((x0, x1), (y0, y1)) in view coordinates
+    width : image width in pixels (the height follows the crop's aspect)
+    values : optional (n,) per-vertex scalars coloured by ``cmap`` between ``vmin`` and ``vmax``
+    cmap : a matplotlib colour map (default :func:`heat_cmap`)
+
+    Returns
+    -------
+    (height, width, 3) uint8
+    """
+    from ..geometry.raster import SKIN_RGB
+
+    (x0, x1), (y0, y1) = crop
+    ss = max(1, int(supersample))
+    W = int(width) * ss
+    scale = W / (x1 - x0)
+    H = max(1, int(round((y1 - y0) * scale / ss))) * ss
+    P = project(V, view)
+    Q = np.column_stack([(P[:, 0] - x0) * scale, (y1 - P[:, 1]) * scale, P[:, 2]])
+    F = np.asarray(F)
+    if values is None:
+        color = SKIN_RGB
+    else:
+        cmap = heat_cmap() if cmap is None else cmap
+        t = (np.asarray(values, float)[F].mean(1) - vmin) / ((vmax - vmin) or 1.0)
+        color = np.asarray(cmap(np.clip(t, 0.0, 1.0)))[:, :3]
+    img = rasterize_mesh(Q, F, (H, W), color=color, background=background)
+    if ss > 1:
+        img = img.reshape(H // ss, ss, W // ss, ss, 3).mean((1, 3)).round().astype(np.uint8)
+    return img
+
+
 # the video-frame rasteriser lives in geometry (retarget's previews may not import report); the
 # report renderer re-exports it beside its matplotlib drawing
 from ..geometry.raster import LIGHT, SKIN_RGB, rasterize_mesh  # noqa: E402,F401

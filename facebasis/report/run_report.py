@@ -47,13 +47,15 @@ def _rel(path: Path, start: Path) -> str:
 
 #: What each file of a run report shows (for index.md).
 RUN_FILES = {
-    "convergence": "E_fit and E_reg (cm²) with the alpha schedule, the weight-step objective (certified and "
-                   "IPOPT) with the lambda schedule, and the constraint residuals, per iteration.",
+    "convergence": "E_fit and E_reg (cm²) with the alpha schedule; the weight-step objective split into the fit "
+                   "of the examples and the prior part (which scales with lambda, drawn with its schedule); the "
+                   "constraint residuals; per iteration.",
     "weights": "The solved weights of each training expression (rows) on each shape (columns), 0 to 1.",
     "residuals": "Relative residual of each training expression after the run; red above the "
                  "missing-expression threshold (dashed).",
-    "shapes": "Every generated shape, coloured by its displacement divided by the shape's own maximum "
-              "(one scale per shape; the maximum in cm is in each panel's title), cropped to the moving face.",
+    "shapes": "Every generated shape, front view, coloured by its displacement divided by the shape's own "
+              "maximum (one scale per shape; the maximum, in the rig's units, under its name), cropped to the "
+              "vertices that move by at least half of some shape's maximum.",
     "crossval": "Cross-validation of `--alpha auto`: pooled and per-fold held-out error against the final "
                 "alpha, the chosen alpha marked.",
     "history": "Per-iteration history: schedule, energies, objectives, constraint residuals, IPOPT status, times.",
@@ -64,11 +66,12 @@ RUN_FILES = {
 
 def _run_tables(out: Path, history: dict, weights: dict, residuals: dict) -> list[Path]:
     its = history["iterations"]
-    keys = [k for k in ("iteration", "alpha", "lam", "e_fit", "e_reg", "weight_objective", "ipopt_objective",
-                        "max_complementarity", "max_bound_violation", "ipopt_max_complementarity",
+    keys = [k for k in ("iteration", "alpha", "lam", "e_fit", "e_reg", "weight_objective", "weight_prior",
+                        "ipopt_objective", "max_complementarity", "max_bound_violation", "ipopt_max_complementarity",
                         "ipopt_max_bound_violation", "ipopt_status", "ipopt_iterations", "basis_seconds",
                         "weight_seconds") if its and k in its[0]]
     header = [{"e_fit": "E_fit (cm²)", "e_reg": "E_reg (cm²)", "weight_objective": "weight objective (cm²)",
+               "weight_prior": "of it, prior (cm²)",
                "ipopt_objective": "IPOPT objective (cm²)", "lam": "lambda (cm²)",
                "basis_seconds": "basis step (s)", "weight_seconds": "weight step (s)"}.get(k, k) for k in keys]
     paths = write_table(out, "history", header,
@@ -215,12 +218,29 @@ def report_run(run_dir, out=None, formats=FORMATS, renders_dir=None, written_as=
 
 
 def shapes_figure(rig, path: Path, names=None, view="front", formats=("png", "pdf"), cols: int | None = None,
-                  normalise: bool = True) -> list[Path]:
+                  normalise: bool = True, panel_px: int = 200) -> list[Path]:
     """Every shape of a rig rendered with its per-vertex displacement (heat map), cropped to the
-    part of the face that moves. ``normalise``: each shape on its own scale (displacement / the
-    shape's maximum, the maximum in cm in the panel title), so small shapes (lids) show as well as
-    the jaw; otherwise one scale in cm for all."""
-    from .figures import PAGE, DIMENSIONLESS, face_crop, unit
+    part of the face that moves (:func:`~facebasis.report.figures.face_crop` with ``rel=0.5``: the
+    vertices that move by at least half of some shape's maximum).
+
+    Each panel is rasterised with numpy (:func:`facebasis.report.render.render_image`) straight
+    into one image of the whole grid, one shape at a time, so memory is that image plus one
+    shape's render however many shapes there are (not a matplotlib polygon collection per shape);
+    the figure shows the grid image with vector titles and colour bar.
+
+    Parameters
+    ----------
+    rig : :class:`facebasis.geometry.rig.Rig` (neutral (n, 3), faces (m, 3), deltas (k, n, 3))
+    path : output path without suffix
+    names : shapes to show (default all, in the rig's order)
+    normalise : each shape on its own scale (displacement / the shape's maximum, the maximum in the
+        rig's units in the panel title), so small shapes (lids) show as well as the jaw; otherwise
+        one scale for all
+    panel_px : width of one panel's render in pixels
+    """
+    from ..progress import progress
+    from .figures import DIMENSIONLESS, PAGE, face_crop, unit
+    from .render import heat_cmap, render_image
 
     plt = _pyplot()
     names = list(rig.names if names is None else names)
@@ -228,38 +248,55 @@ def shapes_figure(rig, path: Path, names=None, view="front", formats=("png", "pd
         cols = int(np.clip(PAGE // (0.066 * max(map(len, names)) + 0.1), 4, 8))
     cols = max(1, min(cols, len(names)))
     rows = int(np.ceil(len(names) / cols))
-    crop = face_crop(rig.neutral, rig.deltas, view)
+    crop = face_crop(rig.neutral, rig.deltas, view, rel=0.5)
     aspect = (crop[1][1] - crop[1][0]) / (crop[0][1] - crop[0][0])
-    # explicit layout (inches): equal panels of the crop's aspect, a title band over each, the colour
-    # bar under all
-    pw, title_h, top, bottom = PAGE / cols, 0.36, 0.3, 0.62
-    ph = pw * aspect
+    pw_px = int(panel_px)
+    ph_px = max(1, int(round(pw_px * aspect)))
+    gap = max(2, pw_px // 40)
+    canvas = np.full((rows * (ph_px + gap), cols * (pw_px + gap), 3), 255, np.uint8)
+    mag_all = None if normalise else np.linalg.norm(rig.deltas, axis=2)
+    vmax_all = 1.0 if normalise else (float(np.percentile(mag_all, 99.5)) or 1.0)
+    cmap = heat_cmap()
+    peaks = []
+    for k, name in enumerate(progress(names, desc="rendering shapes")):
+        i = rig.index([name])[0]
+        mag = np.linalg.norm(rig.deltas[i], axis=1)
+        peak = float(mag.max())
+        peaks.append(peak)
+        vals = mag / (peak or 1.0) if normalise else mag
+        img = render_image(rig.neutral + rig.deltas[i], rig.faces, crop, pw_px, values=vals, vmin=0.0,
+                           vmax=vmax_all, cmap=cmap, view=view)
+        r, c = divmod(k, cols)
+        h = min(img.shape[0], ph_px)
+        canvas[r * (ph_px + gap): r * (ph_px + gap) + h, c * (pw_px + gap): c * (pw_px + gap) + pw_px] = img[:h]
+    # layout (inches): the grid image, a title band over each panel row, the colour bar under all
+    pw = PAGE / cols
+    ph = pw * (ph_px + gap) / (pw_px + gap)
+    title_h, top, bottom = 0.3, 0.3, 0.55
     H = top + rows * (ph + title_h) + bottom
     fig = plt.figure(figsize=(PAGE, H))
-    axes = np.empty((rows, cols), object)
-    for r in range(rows):
-        for c in range(cols):
-            y0 = H - top - r * (ph + title_h) - title_h - ph
-            axes[r, c] = fig.add_axes(((c * pw + 0.02 * pw) / PAGE, y0 / H, 0.96 * pw / PAGE, 0.96 * ph / H))
-    mag = np.linalg.norm(rig.deltas, axis=2)
-    vmax_all = float(np.percentile(mag, 99.5)) or 1.0
-    mapper = None
-    for ax, name in zip(axes.ravel(), names):
-        i = rig.index([name])[0]
-        peak = float(mag[i].max())
-        vals, vmax = (mag[i] / (peak or 1.0), 1.0) if normalise else (mag[i], vmax_all)
-        mapper = draw_mesh(ax, rig.neutral + rig.deltas[i], rig.faces, values=vals, vmin=0, vmax=vmax,
-                           cmap="magma_r", view=view, crop=crop)
-        ax.set_title(f"{name}\nmax {peak:.2f} cm" if normalise else name, fontsize=8, pad=2)
-    for ax in axes.ravel()[len(names):]:
+    for r in range(rows):  # one axis per row of panels: a title band above each
+        y0 = H - top - r * (ph + title_h) - title_h - ph
+        ax = fig.add_axes((0, y0 / H, 1, ph / H))
+        ax.imshow(canvas[r * (ph_px + gap):(r + 1) * (ph_px + gap)], interpolation="antialiased",
+                  extent=(0, cols * (pw_px + gap), ph_px + gap, 0))
+        ax.set_xlim(0, cols * (pw_px + gap))
         ax.axis("off")
-    if mapper is not None:
-        cax = fig.add_axes((0.2, 0.3 / H, 0.6, 0.1 / H))
-        cb = fig.colorbar(mapper, cax=cax, orientation="horizontal")
-        cb.set_label(unit("displacement / the shape's maximum", DIMENSIONLESS) if normalise
-                     else unit("displacement", "cm"))
-    fig.suptitle(f"{len(names)} shapes, " + ("each on its own colour scale (maximum displacement in its title)"
-                                              if normalise else "one colour scale"), y=1 - 0.08 / H, va="top")
+        for c in range(cols):
+            k = r * cols + c
+            if k < len(names):
+                label = f"{names[k]}\nmax {peaks[k]:.2f}" if normalise else names[k]
+                fig.text((c + 0.5) * pw / PAGE, (y0 + ph + 0.02) / H, label, fontsize=8, ha="center", va="bottom")
+    import matplotlib.cm as mcm
+    import matplotlib.colors as mcolors
+
+    cax = fig.add_axes((0.2, 0.28 / H, 0.6, 0.1 / H))
+    cb = fig.colorbar(mcm.ScalarMappable(mcolors.Normalize(0, vmax_all), cmap), cax=cax, orientation="horizontal")
+    cb.set_label(unit("displacement / the shape's maximum", DIMENSIONLESS) if normalise
+                 else unit("displacement", "mesh units"))
+    fig.suptitle(f"{len(names)} shapes, front view cropped to the moving face; "
+                 + ("each on its own colour scale (its maximum displacement, mesh units, under its name)"
+                    if normalise else "one colour scale"), y=1 - 0.06 / H, va="top", fontsize=8)
     return save(fig, path, formats)
 
 

@@ -227,8 +227,14 @@ class CertifiedWeightSolver:
     :meth:`solve_all`) or a Gram matrix (k, k) with ``pairs`` and ``lam`` (examples given to
     :meth:`solve`).
 
-    >>> solver = CertifiedWeightSolver(G, pairs, lam)            # doctest: +SKIP
-    >>> [solver.solve(C[:, j], const[j], prior[j]) for j in range(m)]   # doctest: +SKIP
+    Two correlated shapes that may not be on together (pair (0, 1)); the optimum keeps shape 1:
+
+    >>> import numpy as np
+    >>> from facebasis.rigging.weightproblem import WeightProblem
+    >>> G, c = np.array([[1.0, 0.5], [0.5, 4.0]]), np.array([1.0, 2.1])   # B^T B (k, k), B^T (t - b0) (k,)
+    >>> sol = CertifiedWeightSolver(WeightProblem(G, c, 0.0, [(0, 1)])).solve_example(0)
+    >>> np.round(sol.x, 3).tolist(), round(sol.objective, 4), sol.certified
+    ([0.0, 0.525], -1.1025, True)
     """
 
     def __init__(self, G, pairs=(), lam: float = 0.0, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):

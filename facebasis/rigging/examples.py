@@ -53,9 +53,13 @@ def parse_weights(obj, example_names, shape_names, source: str = "weights") -> n
         if not isinstance(row, dict):
             raise InputError(f"{source}: {ex}: expected an object {{shape: weight}}, found {type(row).__name__}")
         unknown = [s for s in row if s not in lookup]
-        if unknown:
-            raise RigError(f"{source}: {ex}: unknown blendshape names {unknown}; expected names of the template: "
-                           f"{list(shape_names)}")
+        if unknown:  # the nearest name of each when all are near (jawOpem -> jawOpen), else every name
+            import difflib
+
+            near = {s: difflib.get_close_matches(s, list(shape_names), n=1, cutoff=0.75) for s in unknown}
+            hint = ("did you mean " + ", ".join(f"{near[s][0]!r} for {s!r}" for s in unknown) + "?"
+                    if all(near.values()) else f"expected names of the template: {list(shape_names)}")
+            raise RigError(f"{source}: {ex}: unknown blendshape names {unknown}; {hint}")
         for s, v in row.items():
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise InputError(f"{source}: {ex}.{s}: expected a number in [0, 1], found {v!r}")

@@ -219,7 +219,7 @@ class BlendshapeGenerator:
 
     def _prebuild_weight_solver(self, schedule) -> None:
         """Start building the CasADi model on a side thread when a run of ``schedule`` will call
-        IPOPT: CasADi releases the GIL while it builds (0.3 s on ICT), so the build overlaps the
+        IPOPT: CasADi releases the GIL while it builds, so the build overlaps the
         first alternations instead of delaying the final one."""
         if self._weight_solver is not None or self._weight_solver_future is not None:
             return
@@ -329,11 +329,18 @@ class BlendshapeGenerator:
                 ipopt_max_complementarity=sol.ipopt_max_complementarity,
                 ipopt_max_bound_violation=sol.ipopt_max_bound_violation, ipopt_status=sol.ipopt_status,
                 ipopt_iterations=sol.ipopt_iterations, ipopt_success=sol.ipopt_success,
-                basis_seconds=t1 - t0, weight_seconds=sol.seconds,
+                basis_seconds=t1 - t0, weight_seconds=sol.seconds, weight_prior=_prior_term(sol),
             ))
             if progress is not None:
                 progress(history[-1], len(schedule))
         return history, X, self.deltas_of(Bv)
+
+
+def _prior_term(sol) -> float:
+    """``lambda sum_j ||x_j - x~_j||^2`` of a weight step's answer (eq. 5's prior part)."""
+    P = sol.problem
+    D = np.asarray(sol.X, float) - P.prior
+    return float(np.sum(P.lam * np.einsum("jk,jk->j", D, D)))
 
 
 def _available_cores() -> int:

@@ -132,10 +132,9 @@ class GenerationOptions:
     alternation, only the ``"final"`` one (default), or ``"never"``. Its answer only seeds the
     certified branch and bound (:mod:`facebasis.rigging.certify`), whose per-example global optimum
     is the weight step's answer either way; without IPOPT the certified solver runs unseeded.
-    Measured on ICT with 80 training expressions: identical weights (max difference 1e-15),
-    IPOPT 0.65-1.1 s per alternation against 0.05-0.07 s for the certified solver, and IPOPT's
-    seed makes the tree larger (706 nodes against 629), so IPOPT adds no accuracy; ``"final"``
-    keeps it as an independent cross-check whose status and raw objective the history records.
+    IPOPT's answer never improves on the certified optimum (it can only seed the tree), so it adds
+    no accuracy; ``"final"`` keeps it as an independent cross-check whose status and raw objective
+    the history records (the documentation's generation page quotes the formulation study).
     """
 
     iterations: int = 10
@@ -234,6 +233,9 @@ class IterationRecord:
     ipopt_success: bool
     basis_seconds: float
     weight_seconds: float
+    #: the prior part of ``weight_objective``, ``lambda sum_j ||x_j - x~_j||^2`` (eq. 5's second term);
+    #: ``weight_objective - weight_prior`` is the fit of the examples, which does not scale with lambda
+    weight_prior: float = float("nan")
 
 
 @dataclass(frozen=True)

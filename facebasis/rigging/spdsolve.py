@@ -3,13 +3,11 @@
 The basis step (:mod:`facebasis.rigging.basis`) solves one k x k system per triangle (28,068 on
 ICT, k = 53). NumPy has no batched Cholesky solve (``np.linalg.solve`` is LU: twice the flops),
 and SciPy's ``scipy.linalg.lapack.dposv`` keeps the GIL for the whole call, so worker threads
-gain almost nothing from it (measured 12% with two threads). SciPy also publishes its LAPACK as
+gain almost nothing from it. SciPy also publishes its LAPACK as
 C function pointers for compiled code (``scipy.linalg.cython_lapack``, the table NumBa uses);
 calling that pointer through :mod:`ctypes` releases the GIL for the solve itself, so blocks of
-triangles on two threads run in parallel. Measured with ``python -m problems.bench basis --m 80``
-(one whole basis step on ICT: 28,068 systems, k = 53, six right-hand sides each, plus forming them;
-quiet 2-core machine): 0.43 s on one thread, 0.30 s on two, against 0.43 s and 0.40 s with SciPy's
-wrapper.
+triangles on two threads run in parallel (``python -m problems.bench basis`` measures one whole
+basis step both ways).
 
 When the pointer is not available (another SciPy build) :func:`posv_rows` falls back to SciPy's
 wrapper: same LAPACK routine, same answers, serial speed.

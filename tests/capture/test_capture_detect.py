@@ -469,7 +469,8 @@ def test_landmarks_command_without_any_detector(tmp_path, monkeypatch):
 
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
     with pytest.raises(InputError, match=r"found none; install MediaPipe's with pip install 'facebasis\[mediapipe\]' "
-                                         r"\(from a clone: pip install '.\[mediapipe\]'\) or dlib's"):
+                                         r"\(from a clone: pip install '.\[mediapipe\]'\) or dlib's with pip install "
+                                         r"'facebasis\[detect\]' \(from a clone: pip install '.\[detect\]'\)"):
         detect.available_detector()
     with pytest.raises(InputError, match=r"--detector mediapipe: expected the package mediapipe .* install it with "
                                          r"pip install 'facebasis\[mediapipe\]'"):

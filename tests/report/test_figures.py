@@ -208,3 +208,48 @@ def test_penetration_closeups_gain_a_contact_column(tmp_path, linted):
                                               "0 crossing", "3 crossing", "1 crossing", "0 crossing\n(excluded)",
                                               "2 crossing", "0 crossing", "2 crossing\n(excluded)"]
     assert problems["penetration_closeups"] == []
+
+
+def test_render_image_colours_each_triangle_and_keeps_the_largest_value_visible():
+    """The numpy renders of the rig report: per-triangle colours from the values, the top of the
+    colour map is a colour (not black), the crop fills the image."""
+    from facebasis.report.render import heat_cmap, render_image
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])  # counter-clockwise seen from +z (the front view's viewer)
+    img = render_image(V, F, ((0, 1), (0, 1)), 40, values=np.array([0, 1, 1, 0.0]), vmin=0, vmax=1)
+    assert img.shape == (40, 40, 3) and img.dtype == np.uint8
+    low, high = img[10, 5].astype(int), img[35, 35].astype(int)  # above / below the diagonal: two triangles
+    assert (low != high).any()
+    top = np.asarray(heat_cmap()(1.0))[:3]
+    assert top.max() > 0.4  # the largest displacement stays a colour: no black hole
+    assert not (img == 255).all(axis=2).any()  # the crop is the mesh: no background shows
+
+
+def test_face_crop_follows_the_moving_face_not_a_slightly_dragged_head():
+    V = np.random.default_rng(0).uniform(-10, 10, (2000, 3))
+    face = np.abs(V[:, :2]).max(1) < 3
+    deltas = np.zeros((2, len(V), 3))
+    deltas[0, face, 2] = 1.0
+    deltas[1, :, 2] = 0.25                      # a shape that drags the whole head a little
+    deltas[1, face, 2] = 1.0
+    (x0, x1), (y0, y1) = figures.face_crop(V, deltas, rel=0.5)
+    assert -3.6 < x0 < -2.5 and 2.5 < x1 < 3.6 and -3.6 < y0 < -2.5 and 2.5 < y1 < 3.6
+
+
+def test_history_splits_the_weight_objective_into_fit_and_prior(rig_run):
+    """history.json's weight_prior is eq. 5's prior part at the solved weights, lambda ||x - x~||^2
+    (the convergence figure draws the fit, objective - prior, which does not scale with lambda)."""
+    import json
+
+    history = json.loads((rig_run / "history.json").read_text())
+    weights = json.loads((rig_run / "weights.json").read_text())
+    inputs = json.loads((rig_run / "inputs.json").read_text())
+    rough_path = Path(inputs["weights"]) if Path(inputs["weights"]).is_absolute() else rig_run / inputs["weights"]
+    rough = json.loads(rough_path.read_text())
+    last = history["iterations"][-1]
+    x = np.array([[weights[e].get(s, 0.0) for s in history["shapes"]] for e in history["examples"]])
+    xt = np.array([[rough[e].get(s, 0.0) for s in history["shapes"]] for e in history["examples"]])
+    assert last["weight_prior"] == pytest.approx(last["lam"] * float(((x - xt) ** 2).sum()), rel=1e-6)
+    for h in history["iterations"]:
+        assert 0.0 <= h["weight_prior"] <= h["weight_objective"]

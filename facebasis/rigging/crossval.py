@@ -67,8 +67,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from .certify import certify_problem
+from .problem import CV_CANDIDATES
 from .weightproblem import WeightProblem
 
 #: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect)
@@ -78,7 +79,7 @@ DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
 SCHEDULE_RATIO = 5.0
 
 #: how the candidates are generated and scored (module docstring)
-CANDIDATE_MODES = ("deletion", "path", "cold", "both")
+CANDIDATE_MODES = CV_CANDIDATES
 
 #: ``"deletion"``: the path stops once this many consecutive candidates score above the best so far
 PATIENCE = 2
@@ -177,18 +178,45 @@ class CrossValidation:
                 "cpu_seconds": self.cpu_seconds}
 
 
+def refit_heldout(rig, expressions, pairs=()) -> np.ndarray:
+    """Weights (h, k) of expressions (h, n, 3) refitted to ``rig``: the certified optimum of eq. 5
+    with bounds and complementarity, no prior (:func:`~facebasis.rigging.certify.certify_problem`;
+    no IPOPT model is built)."""
+    return certify_problem(WeightProblem.from_rig(rig, expressions, pairs)).X
+
+
 def heldout_error_parts(rig, expressions, pairs=()) -> tuple[float, float]:
     """(``||B_0 + B x - T||^2``, ``||T - B_0||^2``) summed over expressions (h, n, 3), with weights
-    refitted by the certified solver (bounds + complementarity, no prior): the terms of
-    :func:`~facebasis.rigging.generation.reproduction_error`."""
-    problem = WeightProblem.from_rig(rig, expressions, pairs)
-    return max(float(certify_problem(problem).objective), 0.0), float(problem.const.sum())
+    refitted by :func:`refit_heldout`: the terms of :func:`heldout_error`, to pool over folds."""
+    E = np.asarray(expressions, np.float64)
+    X = refit_heldout(rig, E, pairs)
+    return float(np.sum((rig.evaluate(X) - E) ** 2)), float(np.sum((E - rig.neutral) ** 2))
 
 
 def heldout_error(rig, expressions, pairs=()) -> float:
-    """Relative reproduction error of ``expressions`` by ``rig`` with refitted weights (certified)."""
-    num, den = heldout_error_parts(rig, expressions, pairs)
-    return float(np.sqrt(num / den))
+    """How well ``rig`` reproduces expressions (h, n, 3) with refitted weights (:func:`refit_heldout`):
+    ``||B_0 + B x - T|| / ||T - B_0||`` over all of them. The one held-out error of the package (the
+    cross-validation curve, the studies, the benchmarks); it compares rigs fairly, since a shape's
+    amplitude and its weight trade off (method.md A)."""
+    E = np.asarray(expressions, np.float64)
+    X = refit_heldout(rig, E, pairs)
+    return float(np.linalg.norm(rig.evaluate(X) - E) / np.linalg.norm(E - rig.neutral))
+
+
+def check_folds(m: int, folds: int) -> None:
+    """The one check that ``m`` training expressions allow ``folds``-fold cross-validation (made by
+    :func:`cross_validate_alpha`, and by an application before any solving starts).
+
+    Raises
+    ------
+    InputError
+        ``m < folds`` (fields ``alpha``, ``cv_folds``: "alpha auto: expected at least 4 training
+        expressions for 4-fold cross-validation (cv_folds), found 3")
+    """
+    if m < folds:
+        raise InputError(what="{alpha} auto", expected=f"at least {folds} training expressions for {folds}-fold "
+                                                         "cross-validation ({cv_folds})", found=m,
+                         params={"alpha": "alpha", "cv_folds": "cv_folds"})
 
 
 def fold_labels(m: int, folds: int) -> np.ndarray:
@@ -219,13 +247,11 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
     chain = int(chain_iterations or opts.cv_chain_iterations)
     candidates = candidates or opts.cv_candidates
     if candidates not in CANDIDATE_MODES:
-        raise InputError(f"cv_candidates: expected one of {', '.join(CANDIDATE_MODES)}, found {candidates!r}")
+        raise parameter_error("cv_candidates", f"one of {', '.join(CANDIDATE_MODES)}", repr(candidates))
     m = len(generator.problem.examples)
-    if m < folds:
-        raise InputError(f"--alpha auto: expected at least {folds} training expressions for {folds}-fold "
-                         f"cross-validation, found {m}")
+    check_folds(m, folds)
     if any(a <= 0 for a in grid):
-        raise InputError(f"cv_grid: expected final alphas > 0, found {grid}")
+        raise parameter_error("cv_grid", "final alphas > 0", grid)
     labels = fold_labels(m, folds)
     if candidates == "deletion":
         return _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0)
@@ -280,8 +306,8 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
     from threadpoolctl import threadpool_limits
 
     from ..geometry.rig import Rig
+    from ..workers import available_cores
     from .basis import basis_rows
-    from .generation import _available_cores
 
     opts = generator.options
     p = generator.problem
@@ -289,8 +315,7 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
     lam_last = float(opts.lam[1])
     top_its = min(TOP_ITERATIONS or opts.iterations, int(opts.iterations))
     base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
-    gen = generator.with_options(base)
-    gen.free = generator.free
+    gen = generator.with_options(base)  # the same free shapes (unobserved and support unchanged)
     held = [np.flatnonzero(labels == f) for f in range(folds)]
     train = [np.flatnonzero(labels != f) for f in range(folds)]
     R_train = [np.ascontiguousarray(generator.R[:, :, t]) for t in train]  # the training rows of every fold, once
@@ -298,7 +323,7 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
     X = p.initial_weights.copy()
     if gen.free is not None:
         X[:, ~gen.free] = 0.0
-    workers = opts.threads or _available_cores()
+    workers = opts.threads or available_cores()
     pool = ThreadPoolExecutor(workers) if workers > 1 else None
     den = np.zeros(folds)
     history = []
@@ -367,5 +392,6 @@ def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -
                            final_state={"X": X_in, "history": done}, top_iterations=top_its)
 
 
-__all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",
-           "DEFAULT_GRID", "SCHEDULE_RATIO", "CANDIDATE_MODES"]
+__all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "refit_heldout",
+           "fold_labels",
+           "check_folds", "DEFAULT_GRID", "SCHEDULE_RATIO", "CANDIDATE_MODES"]

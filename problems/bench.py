@@ -71,7 +71,7 @@ def bench_rig(repeat: int) -> dict:
     import numpy as np
 
     from facebasis.rigging.problem import GenerationOptions
-    from facebasis.rigging.crossval import heldout_error
+    from facebasis.rigging.heldout import heldout_error
     from facebasis.rigging.generation import generate_blendshapes
     from facebasis.geometry.transfer import deformation_transfer
     from problems.generation import ict_person_problem

@@ -173,7 +173,7 @@ def rig_case(args) -> int:
     ``--no-write``."""
     from facebasis.contact.exact import RIG_STIFFNESS, contact_correct
     from facebasis.contact.penetration import penetration_report
-    from facebasis.rigging.crossval import heldout_error
+    from facebasis.rigging.heldout import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator
     from problems.bench import _machine
     from problems.generation import ict_person_problem

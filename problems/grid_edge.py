@@ -6,7 +6,7 @@ held-out error, and the held-out error of the fixed schedule (5a, a) for every g
 """
 import dataclasses, json, time, os, sys
 import numpy as np
-from facebasis.rigging.crossval import heldout_error
+from facebasis.rigging.heldout import heldout_error
 from facebasis.rigging.generation import BlendshapeGenerator
 from facebasis.rigging.problem import GenerationOptions
 from problems.generation import ict_person_problem

@@ -108,7 +108,7 @@ def cmd_rig(args) -> int:
 def _fresh_run(args, virtual_mode: str) -> int:
     from ..atomic import atomic_directory
     from ..geometry.rig import load_rig_folder, load_target_neutral
-    from ..rigging.crossval import check_folds
+    from ..rigging.heldout import check_folds
     from ..rigging.examples import load_examples, load_weights, parse_pairs
     from ..rigging.generation import BlendshapeGenerator
     from ..rigging.problem import GenerationProblem
@@ -137,7 +137,7 @@ def _fresh_run(args, virtual_mode: str) -> int:
     cv = result.crossval
     if cv is not None:
         print(f"--alpha auto: {len(cv.grid)} candidates x {len(cv.fold_errors)} folds in {cv.seconds:.1f} s; "
-              f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {min(cv.errors):.4f})")
+              f"chose alpha {cv.schedule[0]:g} -> {cv.schedule[1]:g} (held-out error {cv.best_error:.4f})")
     found = None
     if contact is not None:
         from ..rigging.contactstep import contact_generation
@@ -178,7 +178,7 @@ def _add_schedule_args(p, defaults) -> None:
 
 def _add_solver_args(p, defaults) -> None:
     """``--ipopt``, ``--unobserved``, ``--support`` and the cross-validation of ``--alpha auto``."""
-    from ..rigging.crossval import DEFAULT_GRID
+    from ..rigging.cvcurve import DEFAULT_GRID
     from ..rigging.problem import CV_CANDIDATES, IPOPT_MODES, UNOBSERVED_MODES
 
     p.add_argument("--ipopt", choices=IPOPT_MODES, default=None,
@@ -195,9 +195,11 @@ def _add_solver_args(p, defaults) -> None:
                    help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
                         f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
     p.add_argument("--cv-candidates", choices=CV_CANDIDATES, default=None,
-                   help="--alpha auto: one warm-started path on all training expressions, each candidate scored by "
-                        "deleting each fold from its last basis step, the rig returned the path's at the chosen alpha "
-                        "(deletion, about 2-4 runs); each fold's candidates along its own path and the final run along "
+                   help="--alpha auto: one warm-started path on all training expressions through every other "
+                        "candidate, scored by deleting folds from its last basis step (half the folds while the path "
+                        "runs, all for the best and its scored neighbour), the rig returned the path's at the chosen "
+                        "alpha (coarse, about 2 runs); the same path through every candidate, each scored on every "
+                        "fold (deletion, about 3 runs); each fold's candidates along its own path and the final run along "
                         "the same path down to the chosen alpha (path), every candidate from the rough weights with "
                         "its own schedule (cold, about 3.5x the cost), or both curves and the lower one (both; "
                         f"default {defaults.cv_candidates})")

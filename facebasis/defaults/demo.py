@@ -94,7 +94,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         from ..rigging.synthetic import default_face_problem
 
         from ..rigging.problem import GenerationOptions
-        from ..rigging.crossval import heldout_error
+        from ..rigging.heldout import heldout_error
         from ..rigging.generation import generate_blendshapes
         from ..rigging.runs import write_problem_inputs, write_rig_run
 

@@ -105,7 +105,7 @@ def run_task(task: Task) -> dict:
     from threadpoolctl import threadpool_limits
 
     from ..rigging.problem import GenerationOptions
-    from ..rigging.crossval import heldout_error
+    from ..rigging.heldout import heldout_error
     from ..rigging.generation import generate_blendshapes
     from ..geometry.transfer import DeformationTransfer
 

@@ -24,8 +24,11 @@ formulations   IPOPT formulations of complementarity compared against the certif
 examples       training inputs: example meshes, rough-weight files, exclusive pairs
 runs           writing a generation run as a rig folder (weights, history, residuals, glTF)
 verify         re-certify the stored weights of a run folder
-crossval       automatic regularisation: k-fold cross-validation of alpha (``alpha="auto"``), and
-               the one held-out error (``heldout_error``: certified refit, vertex residual)
+crossval       automatic regularisation: k-fold cross-validation of alpha (``alpha="auto"``,
+               ``cross_validate_alpha``) and its procedures
+cvcurve        the cross-validation curve (``CrossValidation``) and the procedures' settings
+cvpath         the path procedures of ``alpha="auto"``: ``"coarse"`` (default) and ``"deletion"``
+heldout        the one held-out error (``heldout_error``: certified refit, vertex residual) and the folds
 enrich         incremental enrichment: resume a finished run with more training expressions
 contactstep    exact contact on the generated shapes (``contact=True``, ``rig --contact``) and the
                final weight step solved again for them

@@ -121,7 +121,7 @@ UNOBSERVED_MODES = ("transfer", "fit")
 IPOPT_MODES = ("every", "final", "never")
 
 #: how ``alpha="auto"`` makes and scores its candidates (:mod:`facebasis.rigging.crossval`)
-CV_CANDIDATES = ("deletion", "path", "cold", "both")
+CV_CANDIDATES = ("coarse", "deletion", "path", "cold", "both")
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ class GenerationOptions:
     cv_folds: int = 4
     cv_grid: tuple[float, ...] = ()
     cv_chain_iterations: int = 2
-    cv_candidates: str = "deletion"
+    cv_candidates: str = "coarse"
 
     def __post_init__(self):
         # the errors name their field (structured: an application writes it by its own name for it)

@@ -246,7 +246,7 @@ def test_ict_generation_beats_transfer_on_heldout():
     rig reproduces unseen expressions far better than plain deformation transfer (measured: ratio
     0.32, seed 0). With 20 the ratio is 0.95 on this held-out set: one example per shape cannot pin
     the person's modulations (see problems/bench.py), so no such claim is tested for 20."""
-    from facebasis.rigging.crossval import heldout_error
+    from facebasis.rigging.heldout import heldout_error
     from facebasis.geometry.transfer import deformation_transfer
     from problems.generation import ict_person_problem
 

@@ -1,0 +1,282 @@
+"""The path procedures of ``alpha="auto"`` (:mod:`facebasis.rigging.crossval`): one warm-started
+regularisation path on all training expressions, every scored candidate scored by deleting each
+fold from its last basis step (``"deletion"``, ``"coarse"``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .cvcurve import PATIENCE, SCHEDULE_RATIO, TOP_ITERATIONS, CrossValidation
+from .heldout import heldout_error_parts
+
+
+def cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -> CrossValidation:
+    """``cv_candidates="deletion"`` (module docstring): one path on all training expressions, each
+    candidate scored by fold deletion of its last basis step; stops after :data:`PATIENCE`
+    candidates in a row above the best."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from threadpoolctl import threadpool_limits
+
+    from ..geometry.rig import Rig
+    from ..workers import available_cores
+    from .basis import basis_rows
+
+    opts = generator.options
+    p = generator.problem
+    folds = int(labels.max()) + 1
+    lam_last = float(opts.lam[1])
+    top_its = min(TOP_ITERATIONS or opts.iterations, int(opts.iterations))
+    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
+    gen = generator.with_options(base)  # the same free shapes (unobserved and support unchanged)
+    held = [np.flatnonzero(labels == f) for f in range(folds)]
+    train = [np.flatnonzero(labels != f) for f in range(folds)]
+    R_train = [np.ascontiguousarray(generator.R[:, :, t]) for t in train]  # the training rows of every fold, once
+    T_held = [p.examples[h] for h in held]
+    X = p.initial_weights.copy()
+    if gen.free is not None:
+        X[:, ~gen.free] = 0.0
+    workers = opts.threads or available_cores()
+    pool = ThreadPoolExecutor(workers) if workers > 1 else None
+    den = np.zeros(folds)
+    history = []
+    states, scores, rows_buf = {}, {}, [None]
+
+    def score(c):  # fold f deleted from candidate c's last basis step: eq. 4 on the other folds
+        a, X_in = grid[c], states[c][0]
+        nums = np.zeros(folds)
+        for f in range(folds):
+            with threadpool_limits(1):
+                rows_buf[0], _, _ = basis_rows(X_in[train[f]].T, R_train[f], gen.A_tilde, gen.w, a, executor=pool,
+                                               out=rows_buf[0])
+            rig = Rig(p.target_neutral, p.template.faces, p.template.names, gen.deltas_of(gen.reconstruct(rows_buf[0])))
+            nums[f], den[f] = heldout_error_parts(rig, T_held[f], generator.pairs)
+            if progress is not None:
+                progress(f, a, float(np.sqrt(nums[f] / den[f])))
+        scores[c] = nums
+        return float(np.sqrt(nums.sum() / den.sum()))
+
+    top = len(grid) - 1
+    try:
+        best_err, worse = np.inf, 0
+        for c in range(top, -1, -1):  # down the path
+            sched = base.schedule() if c == top else [(grid[c], lam_last)] * chain
+            if len(sched) > 1:
+                h, X, _ = gen._iterate(X, sched[:-1], pool, None)
+                history += h
+            states[c] = (X, len(history))  # the weights of the candidate's last basis step, alternations before it
+            h, X, _ = gen._iterate(X, sched[-1:], pool, None)
+            history += h
+            if (top - c) % 2 and c > 0:  # coarse pass: every other candidate (and the smallest)
+                continue
+            err = score(c)
+            if err < best_err:
+                best_err, worse = err, 0
+            else:
+                worse += 1
+                if worse >= PATIENCE:
+                    break
+        b = min(scores, key=lambda c: scores[c].sum())
+        # refined around the coarse minimum, on the side of its better coarse neighbour (one scoring)
+        sides = [c for c in (b - 1, b + 1) if c in states and c not in scores]
+        if len(sides) == 2:
+            err = {c: scores[c + (c - b)].sum() if c + (c - b) in scores else np.inf for c in sides}
+            sides = [min(sides, key=lambda c: err[c])]
+        for c in sides:
+            score(c)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    scored = sorted(scores)  # ascending alpha
+    num = np.array([scores[c] for c in scored])  # (scored, folds)
+    g = tuple(grid[c] for c in scored)
+    errors = np.sqrt(num.sum(1) / den.sum())
+    b = scored[int(np.argmin(errors))]
+    a = grid[b]
+    X_in, n_before = states[b]
+    done = tuple(dataclasses.replace(r, iteration=i + 1) for i, r in enumerate(history[:n_before]))
+    return CrossValidation(grid=g, errors=tuple(map(float, errors)),
+                           fold_errors=tuple(tuple(map(float, np.sqrt(num[:, f] / den[f]))) for f in range(folds)),
+                           best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
+                           chain_iterations=chain, seconds=time.perf_counter() - t0,
+                           cpu_seconds=time.process_time() - c0, candidates="deletion",
+                           curves={"deletion": tuple(map(float, errors))},
+                           path=tuple(grid[c] for c in sorted(states)),
+                           final_state={"X": X_in, "history": done}, top_iterations=top_its)
+
+
+
+#: ``"coarse"``: the path visits every ``COARSE_STEP``-th candidate of the grid from the largest (the
+#: smallest always), so it steps about 10x in alpha on the default grid; one neighbour of the best is
+#: then reached by a detour from the path and scored
+COARSE_STEP = 2
+
+
+class _Path:
+    """The warm-started path of ``"coarse"``: candidates visited from a previous one (or from the
+    rough weights), each candidate's last alternation made only when something continues from it,
+    fold scores kept per candidate and fold (NaN until scored)."""
+
+    def __init__(self, gen, grid, labels, chain, lam_last, progress, pool):
+        from threadpoolctl import threadpool_limits
+
+        self.gen, self.grid, self.labels, self.progress, self.pool = gen, grid, labels, progress, pool
+        self._limits = threadpool_limits
+        self.top = len(grid) - 1
+        self.top_schedule = gen.options.schedule()
+        self.chain, self.lam_last = chain, lam_last
+        folds = int(labels.max()) + 1
+        self.train = [np.flatnonzero(labels != f) for f in range(folds)]
+        self.R_train = [np.ascontiguousarray(gen.R[:, :, t]) for t in self.train]
+        self.T_held = [gen.problem.examples[labels == f] for f in range(folds)]
+        X = gen.problem.initial_weights.copy()
+        if gen.free is not None:
+            X[:, ~gen.free] = 0.0
+        self.start = X
+        self.states, self.ends, self.nums = {}, {}, {}   # c -> (X_in, records, route), (X_end, records), (folds,)
+        self.den = np.full(folds, np.nan)
+        self.rows = None
+
+    def schedule(self, c):
+        return self.top_schedule if c == self.top else [(self.grid[c], self.lam_last)] * self.chain
+
+    def visit(self, c, after=None) -> None:
+        """Go to candidate c from the end of candidate ``after`` (None: from the rough weights), up to
+        the weights entering c's last alternation (the weights its score deletes folds at)."""
+        X, recs = (self.start, []) if after is None else self.end(after)
+        route = () if after is None else self.states[after][2]
+        sched = self.schedule(c)
+        if len(sched) > 1:
+            h, X, _ = self.gen._iterate(X, sched[:-1], self.pool, None)
+            recs = recs + h
+        self.states[c] = (X, recs, route + (c,))
+
+    def end(self, c):
+        """(weights, records) after candidate c's last alternation, made once when first needed."""
+        if c not in self.ends:
+            X, recs, _ = self.states[c]
+            h, X, _ = self.gen._iterate(X, self.schedule(c)[-1:], self.pool, None)
+            self.ends[c] = (X, recs + h)
+        return self.ends[c]
+
+    def score(self, c, folds) -> None:
+        """Fold f deleted from candidate c's last basis step (eq. 4 on the other folds at the path's
+        weights), reconstructed and scored on fold f (:func:`heldout_error_parts`), for ``folds``."""
+        from ..geometry.rig import Rig
+        from .basis import basis_rows
+
+        gen, p, a = self.gen, self.gen.problem, self.grid[c]
+        X_in = self.states[c][0]
+        nums = self.nums.setdefault(c, np.full(len(self.den), np.nan))
+        for f in folds:
+            if not np.isnan(nums[f]):
+                continue
+            with self._limits(1):
+                self.rows, _, _ = basis_rows(X_in[self.train[f]].T, self.R_train[f], gen.A_tilde, gen.w, a,
+                                             executor=self.pool, out=self.rows)
+            rig = Rig(p.target_neutral, p.template.faces, p.template.names, gen.deltas_of(gen.reconstruct(self.rows)))
+            nums[f], self.den[f] = heldout_error_parts(rig, self.T_held[f], gen.pairs)
+            if self.progress is not None:
+                self.progress(f, a, float(np.sqrt(nums[f] / self.den[f])))
+
+    def error(self, c, folds=None) -> float:
+        """Pooled held-out error of c over ``folds`` (default: every fold scored for c)."""
+        nums = self.nums[c]
+        idx = np.flatnonzero(~np.isnan(nums)) if folds is None else np.asarray(folds)
+        return float(np.sqrt(nums[idx].sum() / self.den[idx].sum()))
+
+    def complete(self, c) -> bool:
+        return c in self.nums and not np.isnan(self.nums[c]).any()
+
+
+def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> CrossValidation:
+    """``cv_candidates="coarse"`` (the default; :mod:`facebasis.rigging.crossval`): the deletion
+    scores of ``"deletion"`` on a coarser path, fewer folds where candidates are far apart.
+
+    1. The path visits every :data:`COARSE_STEP`-th candidate from the largest (the smallest always).
+       Each visited candidate but the largest (plain transfer in effect) is scored on the first
+       half of the folds; the path stops after :data:`PATIENCE` scored candidates in a row above the
+       best. The largest is scored only if the best is the largest scored one.
+    2. The best is scored on every fold; so is one neighbour of it on the full grid (on the side of
+       its better coarse neighbour), reached by a detour: ``chain`` alternations at the neighbour
+       from the path's weights at the coarse candidate above it.
+    3. The choice is the lower of the two on every fold (only fully scored candidates compete); the
+       rig returned is the path's (through the detour) at the chosen alpha. The curve reported
+       (``errors``) pools the first half of the folds, which every scored candidate has.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..workers import available_cores
+
+    opts = generator.options
+    folds = int(labels.max()) + 1
+    half = tuple(range((folds + 1) // 2))
+    top_its = min(TOP_ITERATIONS or opts.iterations, int(opts.iterations))
+    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
+    workers = opts.threads or available_cores()
+    pool = ThreadPoolExecutor(workers) if workers > 1 else None
+    path = _Path(generator.with_options(base), grid, labels, chain, float(opts.lam[1]), progress, pool)
+    top = path.top
+    coarse = list(range(top, -1, -COARSE_STEP))
+    coarse += [] if coarse[-1] == 0 else [0]
+    try:
+        best = _coarse_pass(path, coarse, half)
+        path.score(best, range(folds))
+        for n in _neighbours(path, best, half):
+            path.visit(n, after=best + 2 if n == best + 1 else best)
+            path.score(n, range(folds))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    chosen = min((c for c in path.nums if path.complete(c)), key=path.error)
+    scored = sorted(path.nums)
+    X_in, recs, route = path.states[chosen]
+    done = tuple(dataclasses.replace(r, iteration=i + 1) for i, r in enumerate(recs))
+    errors = tuple(path.error(c, half) for c in scored)  # the curve on the folds every candidate has
+    a = grid[chosen]
+    fold_errors = tuple(tuple(float(np.sqrt(path.nums[c][f] / path.den[f])) for c in scored) for f in range(folds))
+    return CrossValidation(grid=tuple(grid[c] for c in scored), errors=errors, fold_errors=fold_errors,
+                           best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
+                           chain_iterations=chain, seconds=time.perf_counter() - t0,
+                           cpu_seconds=time.process_time() - c0, candidates="coarse",
+                           curves={"coarse": errors}, path=tuple(sorted(grid[c] for c in route)),
+                           final_state={"X": X_in, "history": done}, top_iterations=top_its,
+                           coarse_folds=len(half), chosen_error=path.error(chosen))
+
+
+def _coarse_pass(path: _Path, coarse, half) -> int:
+    """Step 1 of :func:`cross_validate_coarse`: returns the best coarse candidate (on ``half``)."""
+    best, worse, prev = None, 0, None
+    for c in coarse:
+        path.visit(c, after=prev)
+        prev = c
+        if c == path.top and len(coarse) > 1:
+            continue  # the largest: scored only if the curve still falls towards it
+        path.score(c, half)
+        if best is None or path.error(c, half) < path.error(best, half):
+            best, worse = c, 0
+        else:
+            worse += 1
+            if worse >= PATIENCE:
+                break
+    if best == max(path.nums) and path.top not in path.nums:
+        path.score(path.top, half)
+        if path.error(path.top, half) < path.error(best, half):
+            best = path.top
+    return best
+
+
+def _neighbours(path: _Path, best: int, half) -> list[int]:
+    """Step 2: the neighbour of ``best`` on the full grid to score (none if both are on the path),
+    on the side of the better coarse neighbour."""
+    sides = [n for n in (best - 1, best + 1) if 0 <= n <= path.top and n not in path.states]
+    if len(sides) == 2:
+        err = {n: path.error(n + (n - best), half) if n + (n - best) in path.nums else np.inf for n in sides}
+        sides = [min(sides, key=lambda n: err[n])]
+    return sides
+
+
+__all__ = ["cross_validate_deletion", "cross_validate_coarse", "COARSE_STEP"]

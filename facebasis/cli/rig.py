@@ -197,7 +197,7 @@ def _add_solver_args(p, defaults) -> None:
     p.add_argument("--cv-candidates", choices=CV_CANDIDATES, default=None,
                    help="--alpha auto: one warm-started path on all training expressions through every other "
                         "candidate, scored by deleting folds from its last basis step (half the folds while the path "
-                        "runs, all for the best and its scored neighbour), the rig returned the path's at the chosen "
+                        "runs, all for the best and its two neighbours), the rig returned the path's at the chosen "
                         "alpha (coarse, about 2 runs); the same path through every candidate, each scored on every "
                         "fold (deletion, about 3 runs); each fold's candidates along its own path and the final run along "
                         "the same path down to the chosen alpha (path), every candidate from the rough weights with "

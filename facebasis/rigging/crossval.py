@@ -15,9 +15,9 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
     candidate from the largest (about 10x apart on the default grid); while it runs, each visited
     candidate is scored on the first half of the folds (the largest, transfer in effect, only if
     the curve still falls towards it) and the path stops once :data:`PATIENCE` scored candidates
-    in a row are above the best; then the best and one neighbour on the full grid (on the side of
-    its better coarse neighbour, reached by a detour of ``cv_chain_iterations`` alternations from
-    the path) are scored on every fold and the lower of the two is chosen. The rig returned is the
+    in a row are above the best; then the best and its neighbours on the full grid (reached by
+    detours of ``cv_chain_iterations`` alternations from the path) are scored on every fold and the
+    lowest is chosen. The rig returned is the
     path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
     ``reports/examples_study/cv_speed.csv``) it costs about 2x the default run against 3-4x for
     ``"deletion"``, choosing the same alpha or one whose held-out error is within 2%;

@@ -115,9 +115,9 @@ class CrossValidation:
                          "deleting each fold from its last basis step (exact refit of eq. 4 at the path's weights), "
                          f"on the first {self.coarse_folds} folds while the path runs (the largest only if the "
                          f"curve still falls towards it; the path stops once {PATIENCE} scored candidates in a row "
-                         "are above the best), then the best and its neighbour on the side of its better coarse "
-                         "neighbour (reached by a detour from the path) on every fold; the returned rig is the "
-                         "path's at the chosen alpha",
+                         "are above the best), then the best and its neighbours on the full grid (reached by detours "
+                         "from the path) on every fold, the lowest chosen; the returned rig is the path's at the "
+                         "chosen alpha",
                }
         what = how.get(self.candidates, self.candidates)
         if len(self.curves) > 1:

@@ -110,8 +110,8 @@ def cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) ->
 
 
 #: ``"coarse"``: the path visits every ``COARSE_STEP``-th candidate of the grid from the largest (the
-#: smallest always), so it steps about 10x in alpha on the default grid; one neighbour of the best is
-#: then reached by a detour from the path and scored
+#: smallest always), so it steps about 10x in alpha on the default grid; the neighbours of the best
+#: are then reached by detours from the path and scored
 COARSE_STEP = 2
 
 
@@ -200,10 +200,10 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
        Each visited candidate but the largest (plain transfer in effect) is scored on the first
        half of the folds; the path stops after :data:`PATIENCE` scored candidates in a row above the
        best. The largest is scored only if the best is the largest scored one.
-    2. The best is scored on every fold; so is one neighbour of it on the full grid (on the side of
-       its better coarse neighbour), reached by a detour: ``chain`` alternations at the neighbour
-       from the path's weights at the coarse candidate above it.
-    3. The choice is the lower of the two on every fold (only fully scored candidates compete); the
+    2. The best is scored on every fold; so are its neighbours on the full grid that the path did
+       not visit, each reached by a detour: ``chain`` alternations at the neighbour from the path's
+       weights at the candidate above it.
+    3. The choice is the lowest of these on every fold (only fully scored candidates compete); the
        rig returned is the path's (through the detour) at the chosen alpha. The curve reported
        (``errors``) pools the first half of the folds, which every scored candidate has.
     """
@@ -225,7 +225,7 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
     try:
         best = _coarse_pass(path, coarse, half)
         path.score(best, range(folds))
-        for n in _neighbours(path, best, half):
+        for n in _neighbours(path, best):
             path.visit(n, after=best + 2 if n == best + 1 else best)
             path.score(n, range(folds))
     finally:
@@ -269,14 +269,10 @@ def _coarse_pass(path: _Path, coarse, half) -> int:
     return best
 
 
-def _neighbours(path: _Path, best: int, half) -> list[int]:
-    """Step 2: the neighbour of ``best`` on the full grid to score (none if both are on the path),
-    on the side of the better coarse neighbour."""
-    sides = [n for n in (best - 1, best + 1) if 0 <= n <= path.top and n not in path.states]
-    if len(sides) == 2:
-        err = {n: path.error(n + (n - best), half) if n + (n - best) in path.nums else np.inf for n in sides}
-        sides = [min(sides, key=lambda n: err[n])]
-    return sides
+def _neighbours(path: _Path, best: int) -> list[int]:
+    """Step 2: the neighbours of ``best`` on the full grid that the path did not visit (both sides:
+    chosen on half the folds, the side would be a guess where the curve is flat)."""
+    return [n for n in (best + 1, best - 1) if 0 <= n <= path.top and n not in path.states]
 
 
 __all__ = ["cross_validate_deletion", "cross_validate_coarse", "COARSE_STEP"]

@@ -321,7 +321,7 @@ def test_deletion_stops_the_path_once_candidates_score_worse():
 
 def test_coarse_path_scores_fold_deletion_and_returns_the_path_rig():
     """"coarse" (the default): the path through every other candidate; the best coarse candidate
-    and one neighbour (a detour from the path) are scored on every fold, the others on the first
+    and its neighbours (detours from the path) are scored on every fold, the others on the first
     half; every fold error is the held-out error of the candidate's last basis step solved without
     the fold at the path's weights (recomputed explicitly here), and the rig returned is the path's
     at the chosen alpha (a full run of final_schedule gives it, weights and history included)."""
@@ -345,7 +345,7 @@ def test_coarse_path_scores_fold_deletion_and_returns_the_path_rig():
     # the path went through every other candidate from the top; the route ends at the choice
     assert set(cv.path) <= set(grid) and cv.path[-1] == 10.0 and cv.path[0] == cv.best_alpha
     full = [c for c in range(len(cv.grid)) if all(f[c] == f[c] for f in cv.fold_errors)]
-    assert len(full) == 2 and cv.grid.index(cv.best_alpha) in full
+    assert len(full) in (2, 3) and cv.grid.index(cv.best_alpha) in full
     # the choice: the finalist with the lower error pooled over every fold
     den = [np.sum((p.examples[np.array(cv.folds) == f] - p.target_neutral) ** 2) for f in range(4)]
     pooled = {cv.grid[c]: np.sqrt(sum(cv.fold_errors[f][c] ** 2 * den[f] for f in range(4)) / sum(den)) for c in full}

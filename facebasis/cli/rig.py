@@ -195,11 +195,11 @@ def _add_solver_args(p, defaults) -> None:
                    help="candidate final alphas of --alpha auto (several after one flag or repeated; default "
                         f"{' '.join(f'{a:g}' for a in DEFAULT_GRID)})")
     p.add_argument("--cv-candidates", choices=CV_CANDIDATES, default=None,
-                   help="--alpha auto: one warm-started path on all training expressions through every other "
-                        "candidate, scored by deleting folds from its last basis step (half the folds while the path "
-                        "runs, all for the best and its two neighbours), the rig returned the path's at the chosen "
-                        "alpha (coarse, about 2 runs); the same path through every candidate, each scored on every "
-                        "fold (deletion, about 3 runs); each fold's candidates along its own path and the final run along "
+                   help="--alpha auto: one warm-started path on all training expressions, every other candidate "
+                        "scored by deleting folds from its last basis step (half the folds while the path runs, all "
+                        "for the best and its two neighbours), the rig returned the path's at the chosen alpha "
+                        "(coarse); the same path, every other candidate and the best's better neighbour scored on "
+                        "every fold (deletion, about 1.3x coarse); each fold's candidates along its own path and the final run along "
                         "the same path down to the chosen alpha (path), every candidate from the rough weights with "
                         "its own schedule (cold, about 3.5x the cost), or both curves and the lower one (both; "
                         f"default {defaults.cv_candidates})")

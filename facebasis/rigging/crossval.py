@@ -10,15 +10,13 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
   expressions is made *the same way* for the chosen alpha, so that the curve scores the
   procedure whose result is returned:
 
-  - ``"coarse"`` (default): the scores of ``"deletion"`` below on a coarser path
-    (:func:`~facebasis.rigging.cvpath.cross_validate_coarse`): the path visits every other
-    candidate from the largest (about 10x apart on the default grid); while it runs, each visited
-    candidate is scored on the first half of the folds (the largest, transfer in effect, only if
-    the curve still falls towards it) and the path stops once :data:`PATIENCE` scored candidates
-    in a row are above the best; then the best and its neighbours on the full grid (reached by
-    detours of ``cv_chain_iterations`` alternations from the path) are scored on every fold and the
-    lowest is chosen. The rig returned is the
-    path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
+  - ``"coarse"`` (default): the path and the scores of ``"deletion"`` below with fewer folds
+    where candidates are far apart (:func:`~facebasis.rigging.cvpath.cross_validate_coarse`):
+    while the path runs, every other candidate (about 10x apart on the default grid) is scored on
+    the first half of the folds (the largest, transfer in effect, only if the curve still falls
+    towards it) and the path stops once :data:`PATIENCE` scored candidates in a row are above the
+    best; then the best and its two neighbours are scored on every fold and the lowest is chosen.
+    The rig returned is the path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
     ``reports/examples_study/cv_speed.csv``) it costs about 2x the default run against 3-4x for
     ``"deletion"``, choosing the same alpha or one whose held-out error is within 2%;
   - ``"deletion"``: one warm-started path (as ``"path"`` below, but the largest

@@ -109,15 +109,14 @@ class CrossValidation:
                            "towards its better coarse neighbour; the path stops once "
                            f"{PATIENCE} scored candidates in a row are above the best; the returned rig is the "
                            "path's at the chosen alpha",
-               "coarse": "one warm-started path on all training expressions through every other candidate "
-                         f"from the largest (schedule 5a -> a, {self.top_iterations} alternations), then "
-                         f"{self.chain_iterations} alternations at each next visited alpha; each candidate scored by "
-                         "deleting each fold from its last basis step (exact refit of eq. 4 at the path's weights), "
-                         f"on the first {self.coarse_folds} folds while the path runs (the largest only if the "
-                         f"curve still falls towards it; the path stops once {PATIENCE} scored candidates in a row "
-                         "are above the best), then the best and its neighbours on the full grid (reached by detours "
-                         "from the path) on every fold, the lowest chosen; the returned rig is the path's at the "
-                         "chosen alpha",
+               "coarse": "one warm-started path on all training expressions from the largest candidate "
+                         f"(schedule 5a -> a, {self.top_iterations} alternations), then {self.chain_iterations} "
+                         "alternations at each next smaller alpha; every other candidate scored by deleting each "
+                         "fold from its last basis step (exact refit of eq. 4 at the path's weights) on the first "
+                         f"{self.coarse_folds} folds while the path runs (the largest only if the curve still falls "
+                         f"towards it; the path stops once {PATIENCE} scored candidates in a row are above the "
+                         "best), then the best and its two neighbours on every fold, the lowest chosen; the "
+                         "returned rig is the path's at the chosen alpha",
                }
         what = how.get(self.candidates, self.candidates)
         if len(self.curves) > 1:

@@ -109,9 +109,8 @@ def cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) ->
 
 
 
-#: ``"coarse"``: the path visits every ``COARSE_STEP``-th candidate of the grid from the largest (the
-#: smallest always), so it steps about 10x in alpha on the default grid; the neighbours of the best
-#: are then reached by detours from the path and scored
+#: ``"coarse"``: while the path runs, every ``COARSE_STEP``-th candidate of the grid from the largest
+#: (the smallest always) is scored, about 10x apart in alpha on the default grid
 COARSE_STEP = 2
 
 
@@ -193,19 +192,23 @@ class _Path:
 
 
 def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> CrossValidation:
-    """``cv_candidates="coarse"`` (the default; :mod:`facebasis.rigging.crossval`): the deletion
-    scores of ``"deletion"`` on a coarser path, fewer folds where candidates are far apart.
+    """``cv_candidates="coarse"`` (the default; :mod:`facebasis.rigging.crossval`): the path and the
+    deletion scores of ``"deletion"``, fewer folds where candidates are far apart.
 
-    1. The path visits every :data:`COARSE_STEP`-th candidate from the largest (the smallest always).
-       Each visited candidate but the largest (plain transfer in effect) is scored on the first
-       half of the folds; the path stops after :data:`PATIENCE` scored candidates in a row above the
-       best. The largest is scored only if the best is the largest scored one.
-    2. The best is scored on every fold; so are its neighbours on the full grid that the path did
-       not visit, each reached by a detour: ``chain`` alternations at the neighbour from the path's
-       weights at the candidate above it.
+    1. The path runs through every candidate from the largest, as in ``"deletion"``. Every
+       :data:`COARSE_STEP`-th one (the smallest always) is scored on the first half of the folds,
+       the largest (plain transfer in effect) only if the best is the largest scored one; the path
+       stops after :data:`PATIENCE` scored candidates in a row above the best.
+    2. The best and its two neighbours on the grid (the path's, the one below visited now if the
+       path stopped at the best) are scored on every fold.
     3. The choice is the lowest of these on every fold (only fully scored candidates compete); the
-       rig returned is the path's (through the detour) at the chosen alpha. The curve reported
-       (``errors``) pools the first half of the folds, which every scored candidate has.
+       rig returned is the path's at the chosen alpha. The curve reported (``errors``) pools the
+       first half of the folds, which every scored candidate has.
+
+    Against ``"deletion"`` (every other candidate and the best's better neighbour on every fold) it
+    scores 14-18 fold deletions instead of 24 on the default grid. A path that skips candidates
+    (about 10x steps) cost half as much again but returned worse rigs: on ICT at m = 80 the
+    alternations through the intermediate alphas matter (held-out 0.0235 against 0.0213, seed 0).
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -226,7 +229,6 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
         best = _coarse_pass(path, coarse, half)
         path.score(best, range(folds))
         for n in _neighbours(path, best):
-            path.visit(n, after=best + 2 if n == best + 1 else best)
             path.score(n, range(folds))
     finally:
         if pool is not None:
@@ -248,12 +250,13 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
 
 
 def _coarse_pass(path: _Path, coarse, half) -> int:
-    """Step 1 of :func:`cross_validate_coarse`: returns the best coarse candidate (on ``half``)."""
+    """Step 1 of :func:`cross_validate_coarse`: the path through every candidate from the largest,
+    the ``coarse`` ones scored on ``half``; returns the best of them."""
     best, worse, prev = None, 0, None
-    for c in coarse:
+    for c in range(path.top, -1, -1):
         path.visit(c, after=prev)
         prev = c
-        if c == path.top and len(coarse) > 1:
+        if c not in coarse or (c == path.top and len(coarse) > 1):
             continue  # the largest: scored only if the curve still falls towards it
         path.score(c, half)
         if best is None or path.error(c, half) < path.error(best, half):
@@ -270,9 +273,13 @@ def _coarse_pass(path: _Path, coarse, half) -> int:
 
 
 def _neighbours(path: _Path, best: int) -> list[int]:
-    """Step 2: the neighbours of ``best`` on the full grid that the path did not visit (both sides:
-    chosen on half the folds, the side would be a guess where the curve is flat)."""
-    return [n for n in (best + 1, best - 1) if 0 <= n <= path.top and n not in path.states]
+    """Step 2: the neighbours of ``best`` on the grid (the one below it is visited now if the path
+    stopped at ``best``): chosen on half the folds, the side would be a guess where the curve is flat."""
+    out = [n for n in (best + 1, best - 1) if 0 <= n <= path.top]
+    for n in out:
+        if n not in path.states:
+            path.visit(n, after=best)
+    return out
 
 
 __all__ = ["cross_validate_deletion", "cross_validate_coarse", "COARSE_STEP"]

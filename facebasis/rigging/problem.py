@@ -131,9 +131,9 @@ class GenerationOptions:
     alpha and lambda go geometrically from their first to their last value over the iterations.
     ``alpha="auto"`` chooses the alpha schedule ``(5 a, a)`` (the paper's ratio) by k-fold
     cross-validation over the training expressions (:mod:`facebasis.rigging.crossval`; ``cv_folds``,
-    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"coarse"`` (default), ``"deletion"``, ``"path"``, ``"cold"`` or ``"both"``,
-    ``cv_chain_iterations``); the final run is made the way the chosen candidate was (with
-    ``"path"``: the warm-started path down to it).
+    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"coarse"`` (default),
+    ``"deletion"``, ``"path"``, ``"cold"`` or ``"both"``, ``cv_chain_iterations``); the final run
+    is made the way the chosen candidate was (with ``"path"``: the warm-started path down to it).
 
     ``unobserved``: a shape whose rough weights stay below ``support`` in every training
     expression has no support in the examples. With ``"transfer"`` (default) its weights are held

@@ -320,8 +320,8 @@ def test_deletion_stops_the_path_once_candidates_score_worse():
 
 
 def test_coarse_path_scores_fold_deletion_and_returns_the_path_rig():
-    """"coarse" (the default): the path through every other candidate; the best coarse candidate
-    and its neighbours (detours from the path) are scored on every fold, the others on the first
+    """"coarse" (the default): the path through every candidate, every other one scored; the best
+    of those and its two neighbours are scored on every fold, the others on the first
     half; every fold error is the held-out error of the candidate's last basis step solved without
     the fold at the path's weights (recomputed explicitly here), and the rig returned is the path's
     at the chosen alpha (a full run of final_schedule gives it, weights and history included)."""

@@ -113,6 +113,10 @@ def cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) ->
 #: (the smallest always) is scored, about 10x apart in alpha on the default grid
 COARSE_STEP = 2
 
+#: ``"coarse"``: the largest coarse candidates (on the default grid 100 and 3, transfer in effect)
+#: are scored only if the best is the largest candidate scored, upwards
+LAZY_COARSE = 2
+
 
 class _Path:
     """The warm-started path of ``"coarse"``: candidates visited from a previous one (or from the
@@ -197,8 +201,9 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
 
     1. The path runs through every candidate from the largest, as in ``"deletion"``. Every
        :data:`COARSE_STEP`-th one (the smallest always) is scored on the first half of the folds,
-       the largest (plain transfer in effect) only if the best is the largest scored one; the path
-       stops after :data:`PATIENCE` scored candidates in a row above the best.
+       the :data:`LAZY_COARSE` largest of those (plain transfer in effect) only if the best is the
+       largest scored one (upwards); the path stops after :data:`PATIENCE` scored candidates in a
+       row above the best.
     2. The best and its two neighbours on the grid (the path's, the one below visited now if the
        path stopped at the best) are scored on every fold.
     3. The choice is the lowest of these on every fold (only fully scored candidates compete); the
@@ -251,13 +256,15 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
 
 def _coarse_pass(path: _Path, coarse, half) -> int:
     """Step 1 of :func:`cross_validate_coarse`: the path through every candidate from the largest,
-    the ``coarse`` ones scored on ``half``; returns the best of them."""
+    the ``coarse`` ones scored on ``half`` (the two largest only if the curve still falls towards
+    them); returns the best of them."""
+    lazy = coarse[:min(LAZY_COARSE, len(coarse) - 1)]
     best, worse, prev = None, 0, None
     for c in range(path.top, -1, -1):
         path.visit(c, after=prev)
         prev = c
-        if c not in coarse or (c == path.top and len(coarse) > 1):
-            continue  # the largest: scored only if the curve still falls towards it
+        if c not in coarse or c in lazy:
+            continue
         path.score(c, half)
         if best is None or path.error(c, half) < path.error(best, half):
             best, worse = c, 0
@@ -265,10 +272,12 @@ def _coarse_pass(path: _Path, coarse, half) -> int:
             worse += 1
             if worse >= PATIENCE:
                 break
-    if best == max(path.nums) and path.top not in path.nums:
-        path.score(path.top, half)
-        if path.error(path.top, half) < path.error(best, half):
-            best = path.top
+    for c in reversed(lazy):  # upwards, while the best is the largest candidate scored
+        if best != max(path.nums):
+            break
+        path.score(c, half)
+        if path.error(c, half) < path.error(best, half):
+            best = c
     return best
 
 
@@ -282,4 +291,4 @@ def _neighbours(path: _Path, best: int) -> list[int]:
     return out
 
 
-__all__ = ["cross_validate_deletion", "cross_validate_coarse", "COARSE_STEP"]
+__all__ = ["cross_validate_deletion", "cross_validate_coarse", "COARSE_STEP", "LAZY_COARSE"]

@@ -61,6 +61,8 @@ class CrossValidation:
     coarse_folds: int | None = None
     #: ``"coarse"``: the pooled error of the chosen alpha over every fold (what it was chosen by)
     chosen_error: float | None = None
+    #: ``"coarse"``: candidates the path passes with one alternation instead of ``chain_iterations``
+    quick_alphas: tuple[float, ...] = ()
 
     @property
     def best_error(self) -> float:
@@ -93,7 +95,7 @@ class CrossValidation:
         for a in path[-2::-1]:
             if a < self.best_alpha:
                 break
-            out += [(a, lam_last)] * self.chain_iterations
+            out += [(a, lam_last)] * (1 if a in self.quick_alphas else self.chain_iterations)
         return out
 
     def to_json(self) -> dict:
@@ -130,8 +132,8 @@ class CrossValidation:
                 "candidates": self.candidates, "curves": {k: list(v) for k, v in self.curves.items()},
                 "chain_iterations": self.chain_iterations, "seconds": self.seconds,
                 **({"path": list(self.path)} if self.path else {}),
-                **({"coarse_folds": self.coarse_folds, "chosen_error": self.chosen_error}
-                   if self.coarse_folds is not None else {}),
+                **({"coarse_folds": self.coarse_folds, "chosen_error": self.chosen_error,
+                    "quick_alphas": list(self.quick_alphas)} if self.coarse_folds is not None else {}),
                 "cpu_seconds": self.cpu_seconds}
 
 

@@ -123,14 +123,14 @@ class _Path:
     rough weights), each candidate's last alternation made only when something continues from it,
     fold scores kept per candidate and fold (NaN until scored)."""
 
-    def __init__(self, gen, grid, labels, chain, lam_last, progress, pool):
+    def __init__(self, gen, grid, labels, chain, lam_last, progress, pool, quick=()):
         from threadpoolctl import threadpool_limits
 
         self.gen, self.grid, self.labels, self.progress, self.pool = gen, grid, labels, progress, pool
         self._limits = threadpool_limits
         self.top = len(grid) - 1
         self.top_schedule = gen.options.schedule()
-        self.chain, self.lam_last = chain, lam_last
+        self.chain, self.lam_last, self.quick = chain, lam_last, set(quick)
         folds = int(labels.max()) + 1
         self.train = [np.flatnonzero(labels != f) for f in range(folds)]
         self.R_train = [np.ascontiguousarray(gen.R[:, :, t]) for t in self.train]
@@ -144,7 +144,9 @@ class _Path:
         self.rows = None
 
     def schedule(self, c):
-        return self.top_schedule if c == self.top else [(self.grid[c], self.lam_last)] * self.chain
+        if c == self.top:
+            return self.top_schedule
+        return [(self.grid[c], self.lam_last)] * (1 if c in self.quick else self.chain)
 
     def visit(self, c, after=None) -> None:
         """Go to candidate c from the end of candidate ``after`` (None: from the rough weights), up to
@@ -199,7 +201,9 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
     """``cv_candidates="coarse"`` (the default; :mod:`facebasis.rigging.crossval`): the path and the
     deletion scores of ``"deletion"``, fewer folds where candidates are far apart.
 
-    1. The path runs through every candidate from the largest, as in ``"deletion"``. Every
+    1. The path runs through every candidate from the largest, as in ``"deletion"``, with one
+       alternation (not ``chain``) at each candidate between the largest and the first one scored
+       (the lazy ones below; on the default grid 10, 3 and 1, transfer in effect). Every
        :data:`COARSE_STEP`-th one (the smallest always) is scored on the first half of the folds,
        the :data:`LAZY_COARSE` largest of those (plain transfer in effect) only if the best is the
        largest scored one (upwards); the path stops after :data:`PATIENCE` scored candidates in a
@@ -226,10 +230,13 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
     base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
     workers = opts.threads or available_cores()
     pool = ThreadPoolExecutor(workers) if workers > 1 else None
-    path = _Path(generator.with_options(base), grid, labels, chain, float(opts.lam[1]), progress, pool)
-    top = path.top
+    top = len(grid) - 1
     coarse = list(range(top, -1, -COARSE_STEP))
     coarse += [] if coarse[-1] == 0 else [0]
+    lazy = coarse[:min(LAZY_COARSE, len(coarse) - 1)]
+    # above the first candidate scored, the rigs are transfer in effect: one alternation each
+    quick = range(coarse[len(lazy)] + 1, top) if len(lazy) else ()
+    path = _Path(generator.with_options(base), grid, labels, chain, float(opts.lam[1]), progress, pool, quick)
     try:
         best = _coarse_pass(path, coarse, half)
         path.score(best, range(folds))
@@ -251,7 +258,8 @@ def cross_validate_coarse(generator, grid, labels, chain, progress, t0, c0) -> C
                            cpu_seconds=time.process_time() - c0, candidates="coarse",
                            curves={"coarse": errors}, path=tuple(sorted(grid[c] for c in route)),
                            final_state={"X": X_in, "history": done}, top_iterations=top_its,
-                           coarse_folds=len(half), chosen_error=path.error(chosen))
+                           coarse_folds=len(half), chosen_error=path.error(chosen),
+                           quick_alphas=tuple(grid[c] for c in quick))
 
 
 def _coarse_pass(path: _Path, coarse, half) -> int:

@@ -16,9 +16,10 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
     the first half of the folds (the largest, transfer in effect, only if the curve still falls
     towards it) and the path stops once :data:`PATIENCE` scored candidates in a row are above the
     best; then the best and its two neighbours are scored on every fold and the lowest is chosen.
-    The rig returned is the path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
-    ``reports/examples_study/cv_speed.csv``) it costs about 2x the default run against 3-4x for
-    ``"deletion"``, choosing the same alpha or one whose held-out error is within 2%;
+    The path passes the candidates above the first one scored (transfer in effect) with one
+    alternation each. The rig returned is the path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
+    ``reports/examples_study/cv_speed.csv``) it costs 2.4-2.8x the default run's CPU time against
+    3.4-3.9x for ``"deletion"``, with the same alpha and held-out error as ``"deletion"``;
   - ``"deletion"``: one warm-started path (as ``"path"`` below, but the largest
     candidate's schedule cut to :data:`TOP_ITERATIONS` alternations) on *all* training
     expressions; candidate ``a`` is scored by deleting each fold from the basis step of its last

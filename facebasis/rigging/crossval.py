@@ -17,9 +17,11 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
     towards it) and the path stops once :data:`PATIENCE` scored candidates in a row are above the
     best; then the best and its two neighbours are scored on every fold and the lowest is chosen.
     The path passes the candidates above the first one scored (transfer in effect) with one
-    alternation each. The rig returned is the path's at the chosen alpha. On ICT persons (m = 20, 80; ``python -m problems.bench_cv``,
-    ``reports/examples_study/cv_speed.csv``) it costs 2.4-2.8x the default run's CPU time against
-    3.4-3.9x for ``"deletion"``, with the same alpha and held-out error as ``"deletion"``;
+    alternation each. The rig returned is the path's at the chosen alpha. On ICT persons (m = 20,
+    80; ``python -m problems.bench_cv``, ``reports/examples_study/cv_speed.csv``, a loaded machine)
+    it cost 1.1-2.6x the default run's CPU time against 1.7-3.9x for ``"deletion"``, with
+    deletion's alpha and held-out error in 5 of 6 cases (the sixth: 0.1 for 0.03, held-out error
+    +1.6%);
   - ``"deletion"``: one warm-started path (as ``"path"`` below, but the largest
     candidate's schedule cut to :data:`TOP_ITERATIONS` alternations) on *all* training
     expressions; candidate ``a`` is scored by deleting each fold from the basis step of its last

@@ -3,13 +3,65 @@
 Every error a user can trigger with bad input derives from :class:`FacebasisError`, so a caller
 can catch the toolkit's errors without catching programming errors. Messages name the file or
 parameter, what was expected and what was found.
+
+An error may carry these as structured fields (``what``, ``expected``, ``found``) in which the
+library's parameters are written as ``{name}`` placeholders (``params``: placeholder -> the
+parameter's library name). ``str(error)`` writes each by its library name
+(``"iterations: expected >= 1, found 0"``); an application that knows its own name for a parameter
+writes the same error with it (:meth:`FacebasisError.renamed`: the command line's
+``"--iterations: expected >= 1, found 0"``), without parsing the message's text.
 """
 
 from __future__ import annotations
 
+import copy
+import re
+
+_PLACEHOLDER = re.compile(r"\{(\w+)\}")
+
 
 class FacebasisError(Exception):
-    """Base class of every error raised on purpose by facebasis."""
+    """Base class of every error raised on purpose by facebasis.
+
+    Parameters
+    ----------
+    message : the whole message (an error without structured fields), or None to compose it from
+        the fields as ``"{what}: expected {expected}, found {found}{note}"``
+    what, expected, found, note : the structured fields (text; ``{name}`` placeholders for the
+        parameters of ``params``)
+    params : {placeholder: library name} of the parameters the fields mention
+    """
+
+    def __init__(self, message: str | None = None, *, what=None, expected=None, found=None, note: str = "",
+                 params: dict | None = None):
+        self.what, self.expected, self.found, self.note = what, expected, found, note
+        self.params = dict(params or {})
+        super().__init__(self._compose({}) if message is None else message)
+
+    def _compose(self, names: dict) -> str:
+        names = {**self.params, **{k: v for k, v in names.items() if k in self.params}}
+
+        def fill(text) -> str:
+            return _PLACEHOLDER.sub(lambda m: names.get(m.group(1), m.group(0)), str(text))
+
+        return f"{fill(self.what)}: expected {fill(self.expected)}, found {fill(self.found)}{fill(self.note)}"
+
+    def renamed(self, names: dict) -> "FacebasisError":
+        """The same error with its parameters written by ``names`` ({library name: the caller's name},
+        e.g. the command line's flags); itself if it has no structured fields or none of them is named."""
+        if self.what is None or not set(names) & set(self.params):
+            return self
+        new = copy.copy(self)
+        new.args = (self._compose(names),)
+        return new
+
+
+def parameter_error(name: str, expected, found, *, label: str | None = None, note: str = "",
+                    cls: type | None = None) -> "FacebasisError":
+    """An error about the library parameter ``name`` (written ``label``, default ``name``):
+    ``"{label}: expected {expected}, found {found}{note}"``, an :class:`InputError` unless ``cls``."""
+    return (cls or InputError)(what="{" + name + "}", expected=expected, found=found, note=note,
+                               params={name: label or name})
 
 
 class MeshError(FacebasisError):

@@ -70,9 +70,10 @@ def bench_rig(repeat: int) -> dict:
 
     import numpy as np
 
-    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+    from facebasis.rigging.problem import GenerationOptions
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import generate_blendshapes
     from facebasis.geometry.transfer import deformation_transfer
-    from facebasis.rigging.weights import WeightSolver
     from problems.generation import ict_person_problem
 
     pp = ict_person_problem(seed=0)
@@ -99,11 +100,10 @@ def bench_rig(repeat: int) -> dict:
           f"{max(h.ipopt_max_bound_violation for h in res.history):.1e})")
     dt = deformation_transfer(p.template, p.target_neutral)
     tpl = p.template.with_neutral(p.target_neutral, p.template.deltas)
-    solver = WeightSolver(k, len(pp.heldout), p.pair_indices)
     out = {}
     print("  held-out expressions, seed 0 (weights refitted, bounds + complementarity, no prior):")
     for name, rig in (("template deltas unchanged", tpl), ("deformation transfer", dt), ("example-based", res.rig)):
-        err = reproduction_error(rig, pp.heldout, p.pair_indices, solver=solver)
+        err = heldout_error(rig, pp.heldout, p.pair_indices)
         shape_err = np.linalg.norm(rig.deltas - pp.truth.deltas, axis=(1, 2)) / np.linalg.norm(pp.truth.deltas, axis=(1, 2))
         out[name] = err
         print(f"    {name:26s} relative error {err:.4f}; per-shape error vs truth: median {np.median(shape_err):.3f}, "
@@ -119,15 +119,15 @@ def bench_rig(repeat: int) -> dict:
         # the target neutral and the held-out expressions depend on the seed only (their own random
         # streams), so deformation transfer's error is computed once per seed
         q20 = pp if seed == 0 else ict_person_problem(seed=seed)
-        e_dt = reproduction_error(deformation_transfer(q20.problem.template, q20.problem.target_neutral), q20.heldout,
-                                  q20.problem.pair_indices, solver=solver)
+        e_dt = heldout_error(deformation_transfer(q20.problem.template, q20.problem.target_neutral), q20.heldout,
+                             q20.problem.pair_indices)
         for q, oracle in ((q20, False), (q20, True), (ict_person_problem(seed=seed, n_train=80), False)):
             prob, opts = q.problem, GenerationOptions()
             if oracle:  # the true weights, held fixed: what the basis step can learn from these examples
                 prob = dataclasses.replace(prob, initial_weights=q.true_weights)
                 opts = GenerationOptions(lam=(1e8, 1e8))
             rig = generate_blendshapes(prob, opts).rig
-            row.append(reproduction_error(rig, q.heldout, prob.pair_indices, solver=solver) / e_dt)
+            row.append(heldout_error(rig, q.heldout, prob.pair_indices) / e_dt)
         ratios.append(row)
         print(f"    {seed:4d} {e_dt:9.4f} {row[0]:9.3f} {row[1]:17.3f} {row[2]:9.3f}")
     out["ratio_20"] = [r[0] for r in ratios]
@@ -278,7 +278,9 @@ def bench_rig_scale(repeat: int, ms=(20, 40, 80, 160)) -> dict:
     expressions, wall and CPU, with the machine's load (other processes share the cores)."""
     import numpy as np
 
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions, use_direct
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
+    from facebasis.rigging.basis import use_direct
     from problems.generation import ict_person_problem
 
     targets = {80: 6.0, 160: 12.0}
@@ -320,8 +322,9 @@ def bench_basis(repeat: int, ms=(80,)) -> dict:
 
     from facebasis.rigging import spdsolve
     from facebasis.rigging.basis import basis_rows, use_direct
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.generation import BlendshapeGenerator
     from facebasis.workers import available_cores
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
 
     cores = available_cores()

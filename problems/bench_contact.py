@@ -173,8 +173,8 @@ def rig_case(args) -> int:
     ``--no-write``."""
     from facebasis.contact.exact import RIG_STIFFNESS, contact_correct
     from facebasis.contact.penetration import penetration_report
-    from facebasis.rigging.generation import BlendshapeGenerator, reproduction_error
-    from facebasis.rigging.weights import WeightSolver
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import BlendshapeGenerator
     from problems.bench import _machine
     from problems.generation import ict_person_problem
 
@@ -211,9 +211,8 @@ def rig_case(args) -> int:
     lines.append(f"new pairs by penetration_report: generated {before}, with contact {after} (not excluded shapes); "
                  f"the true rig has {truth_pairs}")
     lines.append(_passes(contact))
-    solver = WeightSolver(p.template.n_shapes, len(pp.heldout), p.pair_indices)
-    e0 = reproduction_error(res.rig, pp.heldout, p.pair_indices, solver=solver)
-    e1 = reproduction_error(contact.rig, pp.heldout, p.pair_indices, solver=solver)
+    e0 = heldout_error(res.rig, pp.heldout, p.pair_indices)
+    e1 = heldout_error(contact.rig, pp.heldout, p.pair_indices)
     lines.append(f"held-out relative error: without contact {e0:.4f}, with contact {e1:.4f} ({100 * (e1 / e0 - 1):+.2f} %)  "
                  "[target: not worse by more than 5 %]")
     moved = np.linalg.norm((contact.rig.deltas - res.rig.deltas).reshape(len(res.rig.names), -1), axis=1)
@@ -223,7 +222,7 @@ def rig_case(args) -> int:
     if args.truth:
         tc = contact_correct(pp.truth, p.template, transfer=gen.dt, exclude=args.exclude, workers=args.workers,
                              stiffness=beta, allow_target_pairs=True, **rounds)
-        et = reproduction_error(tc.rig, pp.heldout, p.pair_indices, solver=solver)
+        et = heldout_error(tc.rig, pp.heldout, p.pair_indices)
         lines.append("the true rig: " + _passes(tc) + f"; exact check: {'no new pair left' if tc.ok else 'NEW PAIRS LEFT'}")
         lines.append(f"the true rig with contact: held-out error 0 -> {et:.4f} (what intersection-free shapes cost "
                      f"even a perfect rig; in quadrature with {e0:.4f}: {np.hypot(e0, et):.4f})")

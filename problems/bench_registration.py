@@ -273,8 +273,9 @@ def rig_comparison(seed: int = 0, n_train: int = 12, log=print) -> dict:
     import dataclasses
 
     from facebasis.geometry.rigid import umeyama
-    from facebasis.rigging.crossval import heldout_error
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
 
     _, F, T, face, keep, head = _ict_setup()

@@ -52,7 +52,7 @@ def bench_resume(root: Path, seed: int = 0, first: int = 20, more: int = 20) -> 
 
     from facebasis.geometry.meshio import write_mesh
     from facebasis.geometry.rig import Rig, load_rig_folder, write_rig_folder
-    from facebasis.rigging.crossval import heldout_error
+    from facebasis.rigging.heldout import heldout_error
     from facebasis.rigging.examples import load_weights
     from facebasis.rigging.runs import write_problem_inputs
     from problems.generation import ICT_EXCLUSIVE, ict_person_problem

@@ -80,8 +80,11 @@ def summary_table(folder) -> str:
 
 def main(argv=None) -> int:
     from facebasis.atomic import atomic_write_json
-    from facebasis.rigging.crossval import DEFAULT_GRID, cross_validate_alpha, heldout_error
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.cvcurve import DEFAULT_GRID
+    from facebasis.rigging.crossval import cross_validate_alpha
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
 
     ap = argparse.ArgumentParser(prog="python -m problems.cv_diagnose")

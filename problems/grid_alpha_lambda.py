@@ -27,8 +27,9 @@ LAMBDAS = (1.0, 10.0, 100.0, 1000.0)
 def main(argv=None) -> int:
     from facebasis.atomic import atomic_write_bytes
     from facebasis.geometry.transfer import deformation_transfer
-    from facebasis.rigging.crossval import heldout_error
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
     from problems.ict import ict_available, ict_path
 

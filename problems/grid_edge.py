@@ -6,8 +6,9 @@ held-out error, and the held-out error of the fixed schedule (5a, a) for every g
 """
 import dataclasses, json, time, os, sys
 import numpy as np
-from facebasis.rigging.crossval import heldout_error
-from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+from facebasis.rigging.heldout import heldout_error
+from facebasis.rigging.generation import BlendshapeGenerator
+from facebasis.rigging.problem import GenerationOptions
 from problems.generation import ict_person_problem
 m=int(sys.argv[1]); seed=int(sys.argv[2])
 grid=(1e-4,3e-4,1e-3,0.003,0.01,0.03,0.1,0.3,1.0,3.0,10.0,100.0)

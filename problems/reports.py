@@ -32,7 +32,8 @@ REPO = Path(__file__).resolve().parent.parent
 
 def _run_folder(pp, out: Path):
     """An example-based run written as `facebasis rig` writes it, with its inputs as files."""
-    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.problem import GenerationOptions
+    from facebasis.rigging.generation import generate_blendshapes
     from facebasis.rigging.runs import write_problem_inputs, write_rig_run
 
     p = pp.problem

@@ -99,9 +99,15 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("rig-contact-seed1", "The same on seed 1, a person whose true rig intersects itself",
            ("contact/rig_contact_seed1.md",), (f"{PY} problems.bench_contact --rig --truth --seed 1",),
            data=("ict",), script="problems/bench_contact.py"),
-    Recipe("cv-speed", "`--alpha auto` (fold deletion) against the default run: chosen alpha, held-out error, "
+    Recipe("cv-speed", "`--alpha auto` (coarse candidates and fold deletion) against the default run: chosen alpha, held-out error, "
            "wall and CPU time, ICT m = 20 / 80, seeds 0-2",
            ("cv_speed/rows_m*_seed*_*.json",), (f"{PY} problems.bench_cv --m 20 80 --seeds 0 1 2",),
+           data=("ict",), script="problems/bench_cv.py"),
+    Recipe("cv-speed-table", "`--alpha auto` (coarse candidates, the default) against fold deletion and the default "
+           "run: the summary table (alpha, held-out error, CPU and wall ratios), ICT m = 20 / 80, seeds 0-2",
+           ("examples_study/cv_speed.csv",),
+           (f"{PY} problems.bench_cv --m 20 80 --seeds 0 1 2 --heldout 200 "
+            "--csv reports/examples_study/cv_speed.csv",),
            data=("ict",), script="problems/bench_cv.py"),
     Recipe("cv-speed-ipopt-never", "The same without the IPOPT cross-check in either run (compute only)",
            ("cv_speed/ipopt_never/rows_m*_seed*_*.json",),

@@ -35,8 +35,9 @@ METHODS = ("template deltas", "deformation transfer", "paper (unobserved fitted)
 def run_case(m: int, seed: int, grid: tuple[float, ...] = (), methods=METHODS, candidates: str = "path",
              n_heldout: int = 20) -> list[dict]:
     from facebasis.geometry.transfer import deformation_transfer
-    from facebasis.rigging.crossval import heldout_error
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.heldout import heldout_error
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from problems.generation import ict_person_problem
 
     pp = ict_person_problem(seed=seed, n_train=m, n_heldout=n_heldout)

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facebasis.rigging.weightproblem import WeightInstance, WeightProblem
+from facebasis.rigging.certify import WeightInstance
+from facebasis.rigging.weightproblem import WeightProblem
 
 ICT_SUITE_PAIRS = (
     ("mouthLeft", "mouthRight"), ("jawLeft", "jawRight"), ("eyeLookIn_L", "eyeLookOut_L"),

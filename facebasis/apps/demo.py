@@ -93,7 +93,9 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         # example-based generation from training expressions of the person
         from ..rigging.synthetic import default_face_problem
 
-        from ..rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+        from ..rigging.problem import GenerationOptions
+        from ..rigging.heldout import heldout_error
+        from ..rigging.generation import generate_blendshapes
         from ..rigging.runs import write_problem_inputs, write_rig_run
 
         pp = default_face_problem(seed=0, n_train=10, n_heldout=10, noise=0.3)
@@ -109,7 +111,7 @@ def run_demo(out: Path, quick: bool = False, log=print) -> dict:
         history = write_rig_run(stage / "rig", result, options, pp.problem, examples_dir, weights_file,
                                 relative_to=stage / "rig")
         gen_err = _relative_errors(result.rig.deltas, person.deltas)
-        heldout = {label: reproduction_error(rig, pp.heldout, pp.problem.pair_indices)
+        heldout = {label: heldout_error(rig, pp.heldout, pp.problem.pair_indices)
                    for label, rig in (("example-based", result.rig), ("deformation transfer", transferred))}
         summary["generation"] = {
             "seconds": result.seconds + result.precompute_seconds,

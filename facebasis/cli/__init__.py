@@ -194,8 +194,10 @@ def _run(args, out, argv=None) -> int:
         spec = args.outputs
         with run_context(["facebasis", *(sys.argv[1:] if argv is None else argv)], input_paths(args, spec)):
             return int(args.func(args) or 0)
-    except FacebasisError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except FacebasisError as exc:  # library parameters named in its fields are written as the flags
+        from .common import FLAGS
+
+        print(f"error: {exc.renamed(FLAGS)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # SIGINT, and SIGTERM / SIGHUP as Terminated
         signum = signal_number(exc)

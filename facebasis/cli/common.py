@@ -5,12 +5,54 @@ from __future__ import annotations
 import argparse
 
 
-def add_rig_folder_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--template", required=True, help="template rig folder (neutral + one mesh per blendshape)")
+#: the command line's name for every library parameter a structured error names
+#: (:meth:`facebasis.errors.FacebasisError.renamed`): the library says what it knows, the CLI maps
+#: its fields to the flags the user typed
+FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "support": "--support",
+         "cv_folds": "--cv-folds", "cv_grid": "--cv-grid", "cv_candidates": "--cv-candidates",
+         "virtual_weight": "--virtual-weight", "virtual_mode": "--virtual-mode", "virtual_edges": "--virtual-edges",
+         "ipopt": "--ipopt", "unobserved": "--unobserved", "exclusive": "--exclusive", "run_dir": "--resume",
+         "template": "--template", "target": "--target", "more_examples": "--examples", "more_weights": "--weights",
+         "contact": "--contact"}
+
+
+def add_rig_folder_args(p: argparse.ArgumentParser, *, template: str | None = "required",
+                        template_help: str = "template rig folder (neutral + one mesh per blendshape)",
+                        template_metavar: str | None = None, where: str = "the rig folder",
+                        exclude_note: str = "") -> None:
+    """The arguments of a rig folder, declared once for every command that reads one: ``--template``
+    (``template`` "required", "optional" or None for a command that names the folder otherwise),
+    ``--neutral`` (the neutral's file name inside ``where``) and ``--exclude`` (globs of files to
+    ignore; ``exclude_note`` ends its help)."""
+    if template is not None:
+        p.add_argument("--template", required=template == "required", default=None, metavar=template_metavar,
+                       help=template_help)
     p.add_argument("--neutral", default="neutral.obj",
-                   help="file name of the neutral inside the rig folder (default neutral.obj)")
+                   help=f"file name of the neutral inside {where} (default neutral.obj)")
     p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
-                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'" + exclude_note)
+
+
+def warn_rig_folder(rig) -> None:
+    """One line on stderr for a rig folder that looks as it ships (identity modes, many shapes)."""
+    import sys
+
+    from ..geometry.rig import rig_folder_warning
+
+    warning = rig_folder_warning(rig)
+    if warning:
+        print(warning, file=sys.stderr)
+
+
+def once(values, flag: str) -> list:
+    """``values`` in order with repeats dropped, saying so (a repeated flag value is kept once)."""
+    import sys
+
+    out = list(dict.fromkeys(values))
+    if len(out) < len(values):
+        repeated = sorted({str(v) for v in values if values.count(v) > 1})
+        print(f"note: {flag} {', '.join(repeated)} given more than once: used once", file=sys.stderr)
+    return out
 
 
 def virtual_edges_for(args, template):
@@ -28,22 +70,22 @@ def virtual_edges_for(args, template):
     return ve
 
 
-def check_virtual_edge_args(args) -> None:
+def check_virtual_edge_args(args, allowed_without_edges: bool = False) -> str:
     """``--virtual-weight`` / ``--virtual-mode`` shape the virtual-edge energy, so they are refused
-    without ``--virtual-edges`` (before any work) instead of being ignored; fills the mode's default.
-    A resumed run (``rig --resume``) refuses them itself."""
+    without ``--virtual-edges`` (before any work) instead of being ignored, unless
+    ``allowed_without_edges`` (a resumed run refuses them itself). Returns the mode (its default
+    when not given); the namespace is not changed."""
     from ..contact.virtual_edges import VIRTUAL_MODES
     from ..errors import InputError
 
     given = [flag for flag, v in (("--virtual-weight", args.virtual_weight), ("--virtual-mode", args.virtual_mode))
              if v is not None]
-    if given and args.virtual_edges is None and getattr(args, "resume", None) is None:
+    if given and args.virtual_edges is None and not allowed_without_edges:
         raise InputError(f"{', '.join(given)}: expected --virtual-edges as well, found none")
     w = args.virtual_weight
     if w is not None and not (0.0 < w < float("inf")):  # before the meshes are read and the edges detected
         raise InputError(f"--virtual-weight: expected a positive number, found {w:g}")
-    if args.virtual_mode is None:
-        args.virtual_mode = VIRTUAL_MODES[0]
+    return VIRTUAL_MODES[0] if args.virtual_mode is None else args.virtual_mode
 
 
 def add_virtual_edge_args(p: argparse.ArgumentParser) -> None:

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from .common import add_rig_folder_args
 from .outputs import Outputs, capture_video
 
 _OUT = (("out", "folder", "--out"),)
@@ -93,10 +94,7 @@ def register(subparsers) -> None:
     p.add_argument("--mesh", default=None, metavar="FACE.obj|RIG_DIR",
                    help="target mesh facing +z with y up, or a rig folder whose neutral is driven (default: the "
                         "built-in face)")
-    p.add_argument("--neutral", default="neutral.obj",
-                   help="file name of the neutral inside a rig folder given as --mesh (default neutral.obj)")
-    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
-                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'")
+    add_rig_folder_args(p, template=None, where="a rig folder given as --mesh")
     p.add_argument("--no-preview", action="store_true",
                    help="do not write preview.mp4 (the source video beside the driven mesh)")
     p.add_argument("--landmarks", default=None, metavar="INDICES.json",
@@ -117,12 +115,8 @@ def register(subparsers) -> None:
     p.add_argument("--rig", default=None, metavar="RIG_DIR",
                    help="rig folder (neutral + one mesh per blendshape), or 'default' for the built-in face "
                         "(the default)")
-    p.add_argument("--neutral", default="neutral.obj",
-                   help="file name of the neutral inside the rig folder (default neutral.obj)")
-    p.add_argument("--exclude", action="append", default=[], metavar="GLOB",
-                   help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*' for an "
-                        "ICT-FaceKit FaceXModel folder; a folder whose shape names look like identity modes, or "
-                        "that has more than 100 shapes, gets a warning")
+    add_rig_folder_args(p, template=None, exclude_note=" for an ICT-FaceKit FaceXModel folder; a folder whose "
+                        "shape names look like identity modes, or that has more than 100 shapes, gets a warning")
     p.add_argument("--no-preview", action="store_true",
                    help="do not write preview.mp4 (the source video beside the rig rendered with the solved "
                         "weights and head rotation) and weights.png (the main weights over time)")

@@ -81,7 +81,8 @@ def _rough(pp, noise: float, noise_seed: int) -> np.ndarray:
 @lru_cache(maxsize=4)
 def _reference_rig(name: str, seed: int):
     """The rig generated from the true weights (noise 0): the reference of the noise study."""
-    from ..rigging.generation import GenerationOptions, generate_blendshapes
+    from ..rigging.problem import GenerationOptions
+    from ..rigging.generation import generate_blendshapes
 
     pp = person_problem(name, seed)
     p = dataclasses.replace(pp.problem, initial_weights=pp.true_weights)
@@ -104,7 +105,9 @@ def run_task(task: Task) -> dict:
     """Run one task; returns one row of the results table (see :data:`COLUMNS`)."""
     from threadpoolctl import threadpool_limits
 
-    from ..rigging.generation import GenerationOptions, generate_blendshapes, reproduction_error
+    from ..rigging.problem import GenerationOptions
+    from ..rigging.heldout import heldout_error
+    from ..rigging.generation import generate_blendshapes
     from ..geometry.transfer import DeformationTransfer
 
     with threadpool_limits(1):
@@ -144,8 +147,8 @@ def run_task(task: Task) -> dict:
         # held-out and training expressions measured alike: weights refitted (bounds, pairs, no prior);
         # a training error only for the methods that fit the training expressions
         fitted = task.method not in ("template deltas", "deformation transfer")
-        row.update(heldout_error=reproduction_error(rig, pp.heldout, p.pair_indices),
-                   train_error=reproduction_error(rig, p.examples, p.pair_indices) if fitted else "",
+        row.update(heldout_error=heldout_error(rig, pp.heldout, p.pair_indices),
+                   train_error=heldout_error(rig, p.examples, p.pair_indices) if fitted else "",
                    shape_error=float(np.median(shape_err)), seconds=secs)
         if task.study == "noise":
             ref = _reference_rig(task.problem, task.seed)

@@ -40,11 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, SolverError
-from .boxqp import DAQP_OK, BoxQPSolution, box_qp_kkt, solve_box_qp  # noqa: F401 (re-exported)
-from .weightproblem import (  # noqa: F401 (re-exported)
-    ExampleResiduals,
-    WeightInstance, WeightProblem, WeightSolution, bound_violation, complementarity_violation,
-)
+from .boxqp import DAQP_OK, solve_box_qp
+from .weightproblem import ExampleResiduals, WeightProblem, WeightSolution
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,12 +81,12 @@ class CertifiedSolution(ExampleResiduals):
 
 
 
-def _as_problem(G, c, const, pairs, prior, lam) -> WeightProblem:
-    if isinstance(G, WeightProblem):
-        return G
-    if c is None or const is None:
-        raise InputError("weight problem: expected c and const with a Gram matrix G (or a WeightProblem), found none")
-    return WeightProblem(G, c, const, pairs, prior, lam)
+def _one_example(problem: WeightProblem, what: str) -> WeightProblem:
+    if not isinstance(problem, WeightProblem):
+        raise InputError(f"{what}: expected a one-example WeightProblem, found {type(problem).__name__}")
+    if problem.m != 1:
+        raise InputError(f"{what}: expected a problem of one example, found {problem.m}")
+    return problem
 
 
 class _Workspace:
@@ -183,24 +180,19 @@ class _Workspace:
 _PAIR_TOL = 1e-10
 
 
-def certified_weights(G, c=None, const=None, pairs=(), prior=None, lam: float = 0.0, *, start=None,
-                      gap_tol: float = 1e-9, max_nodes: int = 100_000) -> CertifiedSolution:
+def certified_weights(problem: WeightProblem, *, start=None, gap_tol: float = 1e-9,
+                      max_nodes: int = 100_000) -> CertifiedSolution:
     """Global optimum of one example's eq. 5 weight problem by branch and bound over the pairs.
 
     Nodes fix weights to zero; the bound at a node is the exact minimum of its convex-hull
     relaxation (box + ``x_a + x_b <= 1`` for undecided pairs). A relaxed minimiser that satisfies
     every pair gives a leaf, whose branch (the smaller weight of each pair zeroed) is re-solved
     exactly as a box-QP. Best-bound-first; the incumbent is seeded by ``start`` and by rounding
-    the root relaxation.
+    the root relaxation. (A weight step of many examples: :func:`certify_problem`.)
 
     Parameters
     ----------
-    G : (k, k) Gram matrix ``B^T B``, or a one-example :class:`WeightProblem` (then c, const,
-        pairs, prior and lam are not used)
-    c : (k,) ``B^T t`` of the example
-    const : ``t^T t`` (only shifts the objective)
-    pairs : (p, 2) exclusive shape index pairs
-    prior : (k,) rough weights ``x~`` (default zeros); lam : prior weight lambda >= 0
+    problem : a one-example :class:`WeightProblem` (G (k, k), c (1, k), const, pairs, prior, lambda)
     start : (k,) optional starting point (e.g. IPOPT's answer): its branch (the smaller weight of
         each pair zeroed) is solved first and seeds the incumbent
     gap_tol : relative optimality tolerance of the certificate
@@ -209,23 +201,18 @@ def certified_weights(G, c=None, const=None, pairs=(), prior=None, lam: float = 
     Raises
     ------
     InputError
-        malformed instance (shapes, NaN, indefinite G, bad pairs)
+        not a one-example problem (the problem's own checks cover shapes, NaN, indefinite G, bad pairs)
     SolverError
         the tree exceeded ``max_nodes`` or DAQP failed
     """
-    problem = _as_problem(G, c, const, pairs, prior, lam)
-    if problem.m != 1:
-        raise InputError(f"certified_weights: expected a problem of one example, found {problem.m}")
+    problem = _one_example(problem, "certified_weights")
     return CertifiedWeightSolver(problem, gap_tol=gap_tol, max_nodes=max_nodes).solve_example(0, start=start)
 
 
 class CertifiedWeightSolver:
-    """:func:`certified_weights` for many examples that share G, lambda and the pairs (the examples
-    of one weight step): the checks, ``H``, its eigenvalues and the DAQP workspace are set up once.
-
-    ``G`` is a :class:`WeightProblem` (its examples are solved by :meth:`solve_example` and
-    :meth:`solve_all`) or a Gram matrix (k, k) with ``pairs`` and ``lam`` (examples given to
-    :meth:`solve`).
+    """The branch and bound of :func:`certified_weights` for the examples of one
+    :class:`WeightProblem` (they share G, lambda and the pairs): ``H``, its eigenvalues and the DAQP
+    workspace are set up once, then :meth:`solve_example` / :meth:`solve_all` solve examples.
 
     Two correlated shapes that may not be on together (pair (0, 1)); the optimum keeps shape 1:
 
@@ -237,18 +224,13 @@ class CertifiedWeightSolver:
     ([0.0, 0.525], -1.1025, True)
     """
 
-    def __init__(self, G, pairs=(), lam: float = 0.0, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):
-        if not isinstance(G, WeightProblem):
-            k = np.shape(G)[-1] if np.ndim(G) else 0
-            G = WeightProblem(G, np.zeros((0, k)), np.zeros(0), pairs, None, lam)
-        self.problem = G
-        self.lam, self.gap_tol, self.max_nodes = G.lam, gap_tol, max_nodes
-        ev = G.eigenvalues
-        self._ws = _Workspace(G.hessian, G.pairs, float(ev[0]) if ev.size else 0.0)
-
-    def solve(self, c, const, prior=None, *, start=None) -> CertifiedSolution:
-        """One example given by its data (see :func:`certified_weights` for the parameters)."""
-        return self._solve(self.problem.with_examples(c, const, prior), start)
+    def __init__(self, problem: WeightProblem, *, gap_tol: float = 1e-9, max_nodes: int = 100_000):
+        if not isinstance(problem, WeightProblem):
+            raise InputError(f"certified solver: expected a WeightProblem, found {type(problem).__name__}")
+        self.problem = problem
+        self.lam, self.gap_tol, self.max_nodes = problem.lam, gap_tol, max_nodes
+        ev = problem.eigenvalues
+        self._ws = _Workspace(problem.hessian, problem.pairs, float(ev[0]) if ev.size else 0.0)
 
     def solve_example(self, j: int, *, start=None) -> CertifiedSolution:
         """Example j of the solver's problem; ``start`` (k,) as in :func:`certified_weights`."""
@@ -323,7 +305,9 @@ class CertifiedWeightSolver:
 
 def certify_problem(problem: WeightProblem, start=None, free=None, *, gap_tol: float = 1e-9,
                     max_nodes: int = 100_000) -> WeightSolution:
-    """Certified global optimum of every example of ``problem`` (they are independent given G).
+    """The certified solve of a weight step: the global optimum of every example of ``problem``
+    (they are independent given G), a :class:`WeightSolution` (the other solve of the same problem
+    is IPOPT's, :meth:`facebasis.rigging.weights.WeightSolver.solve_problem`).
 
     One :class:`CertifiedWeightSolver` serves all examples; ``start`` (m, k) optionally seeds each.
     ``free`` (k,) bool: only these weights may be nonzero (the others are held at 0 and their pairs
@@ -347,18 +331,13 @@ def certify_problem(problem: WeightProblem, start=None, free=None, *, gap_tol: f
                           certificate_nodes=nodes, certificate_gap=gap)
 
 
-def brute_force_weights(G, c=None, const=None, pairs=(), prior=None, lam: float = 0.0):
-    """Global optimum by enumerating all ``2^p`` branches (one box-QP each). For checking only.
-
-    ``G`` is a Gram matrix with the other arguments as in :func:`certified_weights`, or a
-    one-example :class:`WeightProblem`. Returns (x, objective, branches solved).
-    """
-    problem = _as_problem(G, c, const, pairs, prior, lam)
+def brute_force_weights(problem: WeightProblem):
+    """Global optimum of a one-example :class:`WeightProblem` by enumerating all ``2^p`` branches
+    (one box-QP each). For checking only. Returns (x, objective, branches solved)."""
+    problem = _one_example(problem, "brute force")
     P = problem.pairs
     if len(P) > 16:
         raise InputError(f"brute force: expected at most 16 pairs, found {len(P)}")
-    if problem.m != 1:
-        raise InputError(f"brute force: expected a problem of one example, found {problem.m}")
     ev = problem.eigenvalues
     inst = _Workspace(problem.hessian, P, float(ev[0]) if ev.size else 0.0)
     inst.set_example(problem.linear_term(0), problem.offset(0))
@@ -372,12 +351,33 @@ def brute_force_weights(G, c=None, const=None, pairs=(), prior=None, lam: float 
     return best[0], float(best[1]), inst.count
 
 
-def weight_objective(x, G, c, const, prior=None, lam: float = 0.0) -> float:
-    """One example's eq. 5 objective ``||B x - t||^2 + lambda ||x - x~||^2`` from Gram quantities
-    (:meth:`WeightProblem.objective`)."""
-    return float(WeightProblem(G, c, const, (), prior, lam).objective(x)[0])
+@dataclass(frozen=True, eq=False)
+class WeightInstance:
+    """A named one-example :class:`WeightProblem` of the weight-problem suite (``problems/weights_suite.py``),
+    with its optimum ``known_objective`` if known in closed form; the maths are the problem's."""
+
+    name: str
+    kind: str
+    problem: WeightProblem
+    known_objective: float | None = None
+
+    @classmethod
+    def make(cls, name, kind, G, c, const, prior, lam, pairs, known_objective=None) -> WeightInstance:
+        """From one example's data: G (k, k), c (k,), const, prior (k,), lam, pairs (P, 2)."""
+        return cls(name, kind, WeightProblem(G, c, const, pairs, prior, lam), known_objective)
+
+    k = property(lambda self: self.problem.k, doc="number of shapes")
+    pairs = property(lambda self: self.problem.pairs, doc="(P, 2) exclusive pairs")
+
+    def objective(self, x) -> float:
+        """Eq. 5 at x (k,)."""
+        return float(self.problem.objective(x)[0])
+
+    def certify(self, start=None, **kw):
+        """Certified optimum (:func:`certified_weights`)."""
+        return certified_weights(self.problem, start=start, **kw)
 
 
-__all__ = ["BoxQPSolution", "CertifiedSolution", "CertifiedWeightSolver", "box_qp_kkt", "solve_box_qp",
-           "certified_weights", "certify_problem", "brute_force_weights", "weight_objective",
-           "complementarity_violation", "bound_violation", "WeightInstance", "WeightProblem", "WeightSolution"]
+
+__all__ = ["CertifiedSolution", "CertifiedWeightSolver", "certified_weights", "certify_problem", "brute_force_weights",
+           "WeightInstance"]

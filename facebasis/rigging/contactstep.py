@@ -15,23 +15,18 @@ training residuals are recomputed. The contact inputs are checked before generat
 
 from __future__ import annotations
 
-import dataclasses
-
-import numpy as np
-
 from .certify import certify_problem
-from .generation import BlendshapeGenerator, relative_residuals
 from .problem import GenerationResult
 from .weightproblem import WeightProblem
 
 
-def contact_generation(generator: BlendshapeGenerator, result: GenerationResult, exclude=(),
+def contact_generation(generator, result: GenerationResult, exclude=(),
                        allow_target_pairs: bool = False, **contact_options):
     """Correct a generation result for exact contact and re-solve its final weight step.
 
     Parameters
     ----------
-    generator : the :class:`BlendshapeGenerator` that made ``result`` (its transfer energy smooths
+    generator : the :class:`~facebasis.rigging.generation.BlendshapeGenerator` that made ``result`` (its transfer energy smooths
         the correction; its examples, prior, pairs and unobserved shapes define the weight step).
     result : the generation result; its rig's neutral is the target neutral ``B_0``.
     exclude : shape names left as generated (correctives meant to press layers together).
@@ -54,11 +49,7 @@ def contact_generation(generator: BlendshapeGenerator, result: GenerationResult,
     problem = WeightProblem.from_rig(contact.rig, generator.problem.examples, generator.pairs,
                                      generator.problem.initial_weights, final_lam)
     weights = certify_problem(problem, free=generator.free).X
-    residuals = relative_residuals(contact.rig, generator.problem.examples, weights)
-    threshold = result.options.missing_threshold if result.options is not None else np.inf
-    missing = tuple(n for n, r in zip(result.example_names, residuals) if r > threshold)
-    return contact, dataclasses.replace(result, rig=contact.rig, weights=weights, residuals=residuals,
-                                        missing=missing)
+    return contact, result.with_weights(contact.rig, weights, generator.problem)
 
 
 __all__ = ["contact_generation"]

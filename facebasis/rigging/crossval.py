@@ -10,7 +10,19 @@ eq. 4 (Gao et al. 2015) from the training expressions themselves:
   expressions is made *the same way* for the chosen alpha, so that the curve scores the
   procedure whose result is returned:
 
-  - ``"deletion"`` (default): one warm-started path (as ``"path"`` below, but the largest
+  - ``"coarse"`` (default): the path and the scores of ``"deletion"`` below with fewer folds
+    where candidates are far apart (:func:`~facebasis.rigging.cvpath.cross_validate_coarse`):
+    while the path runs, every other candidate (about 10x apart on the default grid) is scored on
+    the first half of the folds (the largest, transfer in effect, only if the curve still falls
+    towards it) and the path stops once :data:`PATIENCE` scored candidates in a row are above the
+    best; then the best and its two neighbours are scored on every fold and the lowest is chosen.
+    The path passes the candidates above the first one scored (transfer in effect) with one
+    alternation each. The rig returned is the path's at the chosen alpha. On ICT persons (m = 20,
+    80; ``python -m problems.bench_cv``, ``reports/examples_study/cv_speed.csv``, a loaded machine)
+    it cost 1.1-2.6x the default run's CPU time against 1.7-3.9x for ``"deletion"``, with
+    deletion's alpha and held-out error in 5 of 6 cases (the sixth: 0.1 for 0.03, held-out error
+    +1.6%);
+  - ``"deletion"``: one warm-started path (as ``"path"`` below, but the largest
     candidate's schedule cut to :data:`TOP_ITERATIONS` alternations) on *all* training
     expressions; candidate ``a`` is scored by deleting each fold from the basis step of its last
     alternation, i.e. eq. 4 solved again on the other folds at the weights the path gave them, then
@@ -63,137 +75,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from .certify import certify_problem
-from .weightproblem import WeightProblem
-
-#: default candidate final alphas (the paper's 0.1 among them; >= 100 is plain transfer in effect)
-DEFAULT_GRID = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
-
-#: ratio first/last alpha of a candidate schedule (the paper's 0.5 -> 0.1)
-SCHEDULE_RATIO = 5.0
-
-#: how the candidates are generated and scored (module docstring)
-CANDIDATE_MODES = ("deletion", "path", "cold", "both")
-
-#: ``"deletion"``: the path stops once this many consecutive candidates score above the best so far
-PATIENCE = 2
-
-#: ``"deletion"``: at most this many alternations of the largest candidate's schedule (its rig is
-#: transfer in effect, and its weights settle in a few): on ICT persons (m = 20 seeds 0, 1; m = 80
-#: seed 2) 3 instead of 10 chose the same alpha with the same held-out error to 4 digits, 20% less CPU
-TOP_ITERATIONS = 3
-
-
-@dataclass(frozen=True)
-class CrossValidation:
-    """The cross-validation curve behind ``alpha="auto"``.
-
-    grid : candidate final alphas (ascending); errors : pooled held-out relative error per
-    candidate; fold_errors : (folds, candidates) per fold; best_alpha, schedule : the choice and
-    its schedule (first, last); folds : fold of every training expression; candidates : ``"path"``
-    or ``"cold"`` (module docstring), the procedure chosen; curves : the pooled curve of every
-    procedure tried (``"both"`` tries the two); seconds : wall time; rigs_generated : rigs built
-    (folds x candidates).
-    """
-
-    grid: tuple[float, ...]
-    errors: tuple[float, ...]
-    fold_errors: tuple[tuple[float, ...], ...]
-    best_alpha: float
-    schedule: tuple[float, float]
-    folds: tuple[int, ...]
-    chain_iterations: int
-    seconds: float
-    cpu_seconds: float
-    candidates: str = "path"
-    curves: dict = dataclasses.field(default_factory=dict)
-    #: ``"deletion"``: the path's state at the chosen alpha (weights entering its last alternation,
-    #: the records of the alternations before it), so the final run is that one alternation
-    final_state: object = dataclasses.field(default=None, compare=False, repr=False)
-    #: ``"deletion"``: the candidates the path went through (ascending; :attr:`grid` those scored)
-    path: tuple[float, ...] = ()
-    #: alternations of the largest candidate's schedule (None: the options' ``iterations``)
-    top_iterations: int | None = None
-
-    @property
-    def rigs_generated(self) -> int:
-        """Rigs built by the cross-validation: one per fold and candidate, and with ``"both"`` the
-        cold candidates too (the largest candidate's rig is shared by both procedures)."""
-        per_fold = 2 * len(self.grid) - 1 if len(self.curves) > 1 else len(self.grid)
-        return len(self.fold_errors) * per_fold
-
-    def final_schedule(self, options) -> list[tuple[float, float]]:
-        """The (alpha, lambda) of every alternation of the final run on all training expressions:
-        what the curve scored for :attr:`best_alpha` (``options`` give ``iterations`` and lambda).
-
-        ``"cold"``: the schedule ``(5 a, a)``; ``"path"``: the schedule of the largest candidate,
-        then ``chain_iterations`` alternations at every next smaller candidate down to ``a``, at the
-        last lambda.
-        """
-        if self.candidates == "cold":
-            return dataclasses.replace(options, alpha=self.schedule).schedule()
-        # "path" and "deletion": the same warm-started path
-        path = self.path or self.grid
-        top = path[-1]
-        out = dataclasses.replace(options, alpha=(SCHEDULE_RATIO * top, top),
-                                  iterations=self.top_iterations or options.iterations).schedule()
-        lam_last = float(options.lam[1])
-        for a in path[-2::-1]:
-            if a < self.best_alpha:
-                break
-            out += [(a, lam_last)] * self.chain_iterations
-        return out
-
-    def to_json(self) -> dict:
-        how = {"cold": "each candidate a from the rough weights with the schedule 5a -> a",
-               "path": "candidates along one warm-started path from the largest (schedule 5a -> a), then "
-                       f"{self.chain_iterations} alternations at each next smaller alpha; the final run follows "
-                       "that path down to the chosen alpha",
-               "deletion": "one warm-started path on all training expressions from the largest candidate "
-                           f"(schedule 5a -> a, {self.top_iterations} alternations), then "
-                           f"{self.chain_iterations} alternations at each next smaller alpha; each candidate "
-                           "scored by deleting each fold from its last basis step (exact refit of eq. 4 at the "
-                           "path's weights), every other candidate on the way down and the best's neighbour "
-                           "towards its better coarse neighbour; the path stops once "
-                           f"{PATIENCE} scored candidates in a row are above the best; the returned rig is the "
-                           "path's at the chosen alpha",
-               }
-        what = how.get(self.candidates, self.candidates)
-        if len(self.curves) > 1:
-            what = f"both procedures tried, the curve with the lower minimum kept: {what}"
-        return {"method": f"k-fold cross-validation of the final alpha ({what}), "
-                          "held-out error with refitted weights (bounds + complementarity, no prior)",
-                "grid": list(self.grid), "errors": list(self.errors),
-                "fold_errors": [list(r) for r in self.fold_errors], "best_alpha": self.best_alpha,
-                "schedule": list(self.schedule), "folds": list(self.folds),
-                "candidates": self.candidates, "curves": {k: list(v) for k, v in self.curves.items()},
-                "chain_iterations": self.chain_iterations, "seconds": self.seconds,
-                **({"path": list(self.path)} if self.path else {}),
-                "cpu_seconds": self.cpu_seconds}
-
-
-def heldout_error_parts(rig, expressions, pairs=()) -> tuple[float, float]:
-    """(``||B_0 + B x - T||^2``, ``||T - B_0||^2``) summed over expressions (h, n, 3), with weights
-    refitted by the certified solver (bounds + complementarity, no prior): the terms of
-    :func:`~facebasis.rigging.generation.reproduction_error`."""
-    problem = WeightProblem.from_rig(rig, expressions, pairs)
-    return max(float(certify_problem(problem).objective), 0.0), float(problem.const.sum())
-
-
-def heldout_error(rig, expressions, pairs=()) -> float:
-    """Relative reproduction error of ``expressions`` by ``rig`` with refitted weights (certified)."""
-    num, den = heldout_error_parts(rig, expressions, pairs)
-    return float(np.sqrt(num / den))
-
-
-def fold_labels(m: int, folds: int) -> np.ndarray:
-    """Interleaved folds: training expression j in fold ``j mod folds``."""
-    return np.arange(m) % folds
+from ..errors import parameter_error
+from .cvcurve import CANDIDATE_MODES, DEFAULT_GRID, SCHEDULE_RATIO, CrossValidation
+from .cvpath import cross_validate_coarse, cross_validate_deletion
+from .heldout import check_folds, fold_labels, heldout_error_parts
 
 
 def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_iterations: int | None = None,
@@ -219,16 +107,15 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
     chain = int(chain_iterations or opts.cv_chain_iterations)
     candidates = candidates or opts.cv_candidates
     if candidates not in CANDIDATE_MODES:
-        raise InputError(f"cv_candidates: expected one of {', '.join(CANDIDATE_MODES)}, found {candidates!r}")
+        raise parameter_error("cv_candidates", f"one of {', '.join(CANDIDATE_MODES)}", repr(candidates))
     m = len(generator.problem.examples)
-    if m < folds:
-        raise InputError(f"--alpha auto: expected at least {folds} training expressions for {folds}-fold "
-                         f"cross-validation, found {m}")
+    check_folds(m, folds)
     if any(a <= 0 for a in grid):
-        raise InputError(f"cv_grid: expected final alphas > 0, found {grid}")
+        raise parameter_error("cv_grid", "final alphas > 0", grid)
     labels = fold_labels(m, folds)
-    if candidates == "deletion":
-        return _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0)
+    if candidates in ("coarse", "deletion"):
+        run = cross_validate_coarse if candidates == "coarse" else cross_validate_deletion
+        return run(generator, grid, labels, chain, progress, t0, c0)
     lam_last = float(opts.lam[1])
     # the cross-validation's own runs: certified weights only, the candidate's schedule
     base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never")
@@ -271,101 +158,4 @@ def cross_validate_alpha(generator, grid=None, folds: int | None = None, chain_i
                            curves={mo: tuple(map(float, cu)) for mo, cu in curves.items()})
 
 
-def _cross_validate_deletion(generator, grid, labels, chain, progress, t0, c0) -> CrossValidation:
-    """``cv_candidates="deletion"`` (module docstring): one path on all training expressions, each
-    candidate scored by fold deletion of its last basis step; stops after :data:`PATIENCE`
-    candidates in a row above the best."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from threadpoolctl import threadpool_limits
-
-    from ..geometry.rig import Rig
-    from .basis import basis_rows
-    from .generation import _available_cores
-
-    opts = generator.options
-    p = generator.problem
-    folds = int(labels.max()) + 1
-    lam_last = float(opts.lam[1])
-    top_its = min(TOP_ITERATIONS or opts.iterations, int(opts.iterations))
-    base = dataclasses.replace(opts, alpha=(SCHEDULE_RATIO * grid[-1], grid[-1]), ipopt="never", iterations=top_its)
-    gen = generator.with_options(base)
-    gen.free = generator.free
-    held = [np.flatnonzero(labels == f) for f in range(folds)]
-    train = [np.flatnonzero(labels != f) for f in range(folds)]
-    R_train = [np.ascontiguousarray(generator.R[:, :, t]) for t in train]  # the training rows of every fold, once
-    T_held = [p.examples[h] for h in held]
-    X = p.initial_weights.copy()
-    if gen.free is not None:
-        X[:, ~gen.free] = 0.0
-    workers = opts.threads or _available_cores()
-    pool = ThreadPoolExecutor(workers) if workers > 1 else None
-    den = np.zeros(folds)
-    history = []
-    states, scores, rows_buf = {}, {}, [None]
-
-    def score(c):  # fold f deleted from candidate c's last basis step: eq. 4 on the other folds
-        a, X_in = grid[c], states[c][0]
-        nums = np.zeros(folds)
-        for f in range(folds):
-            with threadpool_limits(1):
-                rows_buf[0], _, _ = basis_rows(X_in[train[f]].T, R_train[f], gen.A_tilde, gen.w, a, executor=pool,
-                                               out=rows_buf[0])
-            rig = Rig(p.target_neutral, p.template.faces, p.template.names, gen.deltas_of(gen.reconstruct(rows_buf[0])))
-            nums[f], den[f] = heldout_error_parts(rig, T_held[f], generator.pairs)
-            if progress is not None:
-                progress(f, a, float(np.sqrt(nums[f] / den[f])))
-        scores[c] = nums
-        return float(np.sqrt(nums.sum() / den.sum()))
-
-    top = len(grid) - 1
-    try:
-        best_err, worse = np.inf, 0
-        for c in range(top, -1, -1):  # down the path
-            sched = base.schedule() if c == top else [(grid[c], lam_last)] * chain
-            if len(sched) > 1:
-                h, X, _ = gen._iterate(X, sched[:-1], pool, None)
-                history += h
-            states[c] = (X, len(history))  # the weights of the candidate's last basis step, alternations before it
-            h, X, _ = gen._iterate(X, sched[-1:], pool, None)
-            history += h
-            if (top - c) % 2 and c > 0:  # coarse pass: every other candidate (and the smallest)
-                continue
-            err = score(c)
-            if err < best_err:
-                best_err, worse = err, 0
-            else:
-                worse += 1
-                if worse >= PATIENCE:
-                    break
-        b = min(scores, key=lambda c: scores[c].sum())
-        # refined around the coarse minimum, on the side of its better coarse neighbour (one scoring)
-        sides = [c for c in (b - 1, b + 1) if c in states and c not in scores]
-        if len(sides) == 2:
-            err = {c: scores[c + (c - b)].sum() if c + (c - b) in scores else np.inf for c in sides}
-            sides = [min(sides, key=lambda c: err[c])]
-        for c in sides:
-            score(c)
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    scored = sorted(scores)  # ascending alpha
-    num = np.array([scores[c] for c in scored])  # (scored, folds)
-    g = tuple(grid[c] for c in scored)
-    errors = np.sqrt(num.sum(1) / den.sum())
-    b = scored[int(np.argmin(errors))]
-    a = grid[b]
-    X_in, n_before = states[b]
-    done = tuple(dataclasses.replace(r, iteration=i + 1) for i, r in enumerate(history[:n_before]))
-    return CrossValidation(grid=g, errors=tuple(map(float, errors)),
-                           fold_errors=tuple(tuple(map(float, np.sqrt(num[:, f] / den[f]))) for f in range(folds)),
-                           best_alpha=a, schedule=(SCHEDULE_RATIO * a, a), folds=tuple(map(int, labels)),
-                           chain_iterations=chain, seconds=time.perf_counter() - t0,
-                           cpu_seconds=time.process_time() - c0, candidates="deletion",
-                           curves={"deletion": tuple(map(float, errors))},
-                           path=tuple(grid[c] for c in sorted(states)),
-                           final_state={"X": X_in, "history": done}, top_iterations=top_its)
-
-
-__all__ = ["CrossValidation", "cross_validate_alpha", "heldout_error", "heldout_error_parts", "fold_labels",
-           "DEFAULT_GRID", "SCHEDULE_RATIO", "CANDIDATE_MODES"]
+__all__ = ["cross_validate_alpha"]

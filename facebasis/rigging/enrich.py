@@ -30,14 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from ..jsonio import read_json
 from ..geometry.rig import Rig
-from .generation import (BlendshapeGenerator, GenerationOptions, GenerationProblem, GenerationResult,
-                         relative_residuals)
+from .generation import BlendshapeGenerator
+from .problem import GenerationOptions, GenerationProblem, GenerationResult
 
 #: alternations at the final alpha and lambda after the warm start
 RESUME_ITERATIONS = 3
+
+#: the parameter the errors about the finished run name (an application writes it by its own name)
+_RUN = {"run_dir": "run_dir"}
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,8 @@ def _read_history(run: Path):
     recorded none: then the end of its options' schedule is used), from one read of history.json."""
     path = run / "history.json"
     if not path.is_file():
-        raise InputError(f"--resume {run}: expected history.json (written by `facebasis rig`), found no such file")
+        raise InputError(what=f"{{run_dir}} {run}", expected="history.json (written by `facebasis rig`)",
+                         found="no such file", params=_RUN)
     history = read_json(path, "the run's history (JSON)")
     try:
         opts = history["options"]
@@ -91,21 +95,18 @@ def resume_generation(generator: BlendshapeGenerator, previous_rig: Rig, previou
     p, opts = generator.problem, generator.options
     k = p.template.n_shapes
     if previous_rig.n_shapes != k or previous_rig.n_vertices != p.template.n_vertices:
-        raise InputError(f"--resume: expected a run of {k} shapes on {p.template.n_vertices} vertices, found "
-                         f"{previous_rig.n_shapes} shapes on {previous_rig.n_vertices}")
+        raise InputError(what="{run_dir}", expected=f"a run of {k} shapes on {p.template.n_vertices} vertices",
+                         found=f"{previous_rig.n_shapes} shapes on {previous_rig.n_vertices}", params=_RUN)
     if int(iterations) < 1:
-        raise InputError(f"--iterations: expected >= 1 alternations after the warm start, found {iterations}")
+        raise parameter_error("iterations", ">= 1 alternations after the warm start", iterations)
     alpha, lam = opts.schedule()[-1] if final_step is None else final_step
     n_new = len(p.examples) - n_previous
     used = dataclasses.replace(opts, iterations=int(iterations), alpha=(alpha, alpha), lam=(lam, lam))
     if n_new == 0:
-        X = np.asarray(previous_weights, np.float64)
-        res = relative_residuals(previous_rig, p.examples, X)
-        return GenerationResult(rig=previous_rig, weights=X, history=(), residuals=res,
-                                missing=tuple(n for n, r in zip(p.example_names, res) if r > opts.missing_threshold),
-                                example_names=p.example_names, seconds=time.perf_counter() - t0,
-                                precompute_seconds=generator.precompute_seconds, options=used,
-                                unobserved=generator.unobserved)
+        return GenerationResult.from_weights(previous_rig, previous_weights, p, used, history=(),
+                                             seconds=time.perf_counter() - t0,
+                                             precompute_seconds=generator.precompute_seconds,
+                                             unobserved=generator.unobserved)
     gen = generator.with_options(used)
     X = gen.weight_step(rig_as_rows(previous_rig), lam, ipopt=False).weights
     return gen.run(progress, X0=X, schedule=[(alpha, lam)] * int(iterations))
@@ -117,7 +118,9 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     """Resume the finished run ``run_dir`` with the training expressions of ``more_examples``
     (a folder) and their rough weights ``more_weights`` (JSON), both None for none;
     ``template``/``target`` default to the ones the run recorded. Everything is read and validated
-    before any solving."""
+    before any solving: a run corrected for exact contact (``contact.json``) is refused (resuming
+    would re-generate its shapes without that guarantee), and a run made with virtual edges needs
+    ``virtual_edges`` again."""
     from ..geometry.rig import load_rig_folder, load_target_neutral
     from .examples import load_weights
     from .verify import load_training, read_inputs
@@ -125,12 +128,22 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     t0 = time.perf_counter()
     run = Path(run_dir)
     if not run.is_dir():
-        raise InputError(f"--resume: expected a finished `facebasis rig` output folder, found no folder {run}")
+        raise InputError(what="{run_dir}", expected="a finished `facebasis rig` output folder",
+                         found=f"no folder {run}", params=_RUN)
+    if (run / "contact.json").is_file():
+        raise InputError(what=f"{{run_dir}} {run_dir}", expected="a run made without {contact}",
+                         found="contact.json (its shapes were corrected for contact; a resumed run re-generates them "
+                               "without it and would drop that guarantee); start a new run with {contact}",
+                         params={**_RUN, "contact": "contact"})
     inputs, ex_dirs, w_files = read_inputs(run)
+    src = dict(inputs.get("sources") or {})
+    if src.get("virtual_edges") is True and virtual_edges is None:
+        raise InputError(what=f"{{run_dir}} {run_dir}", expected="{virtual_edges} (and {template}) as the run was made "
+                         "with virtual edges", found="none (the resumed run would drop their energy)",
+                         params={**_RUN, "virtual_edges": "virtual_edges", "template": "template"})
     options, final_step = _read_history(run)
     if threads is not None:
         options = dataclasses.replace(options, threads=threads)
-    src = dict(inputs.get("sources") or {})
 
     def resolve(p):
         return str(p if Path(p).is_absolute() else run / p)
@@ -138,15 +151,17 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     tpl_dir = template or (resolve(src["template"]) if "template" in src else None)
     tgt = target or (resolve(src["target"]) if "target" in src else None)
     if tpl_dir is None or tgt is None:
-        raise InputError(f"--resume {run}: expected --template and --target (the run's inputs.json records "
-                         f"none), found {'neither' if tpl_dir is None and tgt is None else 'only one'}")
+        raise InputError(what=f"{{run_dir}} {run}", expected="{template} and {target} (the run's inputs.json "
+                         "records none)", found="neither" if tpl_dir is None and tgt is None else "only one",
+                         params={**_RUN, "template": "template", "target": "target"})
     neutral = neutral or src.get("neutral", "neutral.obj")
     exclude = list(exclude) if exclude else list(src.get("exclude", []))
     tpl = load_rig_folder(tpl_dir, neutral, exclude)
     B0 = load_target_neutral(tgt, tpl)
     if (more_examples is None) != (more_weights is None):
-        raise InputError("--resume: expected --examples and --weights together (or neither), found only "
-                         + ("--examples" if more_weights is None else "--weights"))
+        raise InputError(what="{run_dir}", expected="{more_examples} and {more_weights} together (or neither)",
+                         found="only " + ("{more_examples}" if more_weights is None else "{more_weights}"),
+                         params={**_RUN, "more_examples": "more_examples", "more_weights": "more_weights"})
     more_dirs = [] if more_examples is None else [Path(more_examples)]
     more_files = [] if more_weights is None else [Path(more_weights)]
     n_prev = len(load_training(ex_dirs, w_files, tpl)[0])
@@ -154,8 +169,8 @@ def resume_run(run_dir, more_examples, more_weights, *, template=None, neutral=N
     prev = load_rig_folder(run, "neutral.obj")
     missing = sorted(set(tpl.names) - set(prev.names))
     if missing or prev.n_shapes != tpl.n_shapes:
-        raise InputError(f"--resume {run}: expected the template's {tpl.n_shapes} shapes in the run folder, "
-                         f"found {prev.n_shapes} (missing {missing})")
+        raise InputError(what=f"{{run_dir}} {run}", expected=f"the template's {tpl.n_shapes} shapes in the run folder",
+                         found=f"{prev.n_shapes} (missing {missing})", params=_RUN)
     prev = Rig(B0, tpl.faces, tpl.names, prev.deltas[prev.index(tpl.names)], source=f"run {run}")
     W = load_weights(run / "weights.json", names[:n_prev], tpl.names)
     problem = GenerationProblem(tpl, B0, T, X0, names, tuple(tuple(p) for p in inputs["exclusive"]), virtual_edges)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, RigError
+from ..errors import InputError, RigError, parameter_error
 from ..jsonio import read_json
 from ..geometry.meshio import MESH_SUFFIXES, read_mesh_like
 from ..geometry.rig import Rig
@@ -90,7 +90,7 @@ def parse_pairs(specs) -> tuple[tuple[str, str], ...]:
     for spec in specs or ():
         parts = str(spec).split(":")
         if len(parts) != 2 or not all(p.strip() for p in parts):
-            raise InputError(f"--exclusive: expected SHAPE_A:SHAPE_B, found {spec!r}")
+            raise parameter_error("exclusive", "SHAPE_A:SHAPE_B", repr(spec))
         a, b = parts[0].strip(), parts[1].strip()
         key = frozenset((a, b))
         if key in seen:

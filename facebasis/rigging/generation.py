@@ -16,10 +16,10 @@ of the target and rough weights ``x~``, alternate
 * the **weight step** (eq. 5): :class:`~facebasis.rigging.weights.WeightSolver` (CasADi + IPOPT, then the
   certified global optimum of every example by branch and bound, :mod:`facebasis.rigging.certify`).
 
-The problem and options live in :mod:`facebasis.rigging.problem`, the basis step in
-:mod:`facebasis.rigging.basis`; this module precomputes once and alternates
-(:class:`BlendshapeGenerator`, :func:`generate_blendshapes`). Their names are importable from here
-as well.
+The problem, options and result live in :mod:`facebasis.rigging.problem`, the basis step in
+:mod:`facebasis.rigging.basis`, the weight step's two solves in :mod:`facebasis.rigging.certify`
+and :mod:`facebasis.rigging.weights`; this module precomputes once and alternates
+(:class:`BlendshapeGenerator`, :func:`generate_blendshapes`).
 
 Units of ``w_i``: the paper's ``s_i = ||A_i^S||`` is a length, so ``w_i`` would change with the
 mesh's units (cm vs m). facebasis uses by default the scale-free relative edge change
@@ -38,9 +38,10 @@ References
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -50,86 +51,149 @@ from ..errors import InputError
 from ..geometry.gradients import frames_cm
 from ..geometry.rig import Rig
 from ..geometry.transfer import DeformationTransfer
+from ..workers import available_cores
+from .basis import basis_rows, regularisation_weights, to_triangle_major, training_rows
 from .certify import certify_problem
+from .contactstep import contact_generation
+from .crossval import cross_validate_alpha
+from .problem import GenerationOptions, GenerationProblem, GenerationResult, IterationRecord
 from .weightproblem import WeightProblem, WeightSolution
-from .weights import WeightSolver, eq5_objective  # noqa: F401 (eq5_objective re-exported)
-
-
-from .basis import (  # noqa: F401  (re-exported: the generation API in one place)
-    BASIS_BLOCK, WOODBURY_RATIO, basis_energies, basis_rows, basis_step, regularisation_weights, to_triangle_major,
-    training_rows, use_direct,
-)
-from .problem import (  # noqa: F401
-    IPOPT_MODES, UNOBSERVED_MODES, GenerationOptions, GenerationProblem, GenerationResult, IterationRecord,
-)
+from .weights import WeightSolver
 
 # ----------------------------------------------------------------------------------------------
 # orchestration: problem -> precompute -> steps -> result
 
-class BlendshapeGenerator:
-    """Precomputes everything a run needs once: transfer (frames, factorisation), the
-    deformation-transfer prior, regulariser weights, training frame deltas and the CasADi solver.
+@dataclass(frozen=True, eq=False)
+class TemplatePart:
+    """What a run precomputes from the template and the target neutral alone (the same for every
+    subset of the training expressions and every schedule).
+
+    dt : the :class:`~facebasis.geometry.transfer.DeformationTransfer` (frames, factorisation)
+    A_tilde : (m_tri, 6, k) eq. 3 prior, the transferred frame deltas, triangle-major
+    w : (m_tri, k) eq. 3 per-triangle regulariser weights
+    extra_targets : (e, 3k) virtual-edge targets (Li et al. 2023) or None
+    anchor_rows : (a, 3k) anchor values (the template's delta at still vertices)
     """
 
-    def __init__(self, problem: GenerationProblem, options: GenerationOptions | None = None):
-        t0 = time.perf_counter()
-        self.problem = problem
-        self.options = options or GenerationOptions()
-        opts = self.options
+    dt: DeformationTransfer
+    A_tilde: np.ndarray
+    w: np.ndarray
+    extra_targets: np.ndarray | None
+    anchor_rows: np.ndarray
+
+    @classmethod
+    def build(cls, problem: GenerationProblem, options: GenerationOptions) -> "TemplatePart":
         tpl = problem.template
         F = tpl.faces
-        B0 = problem.target_neutral
-        # the training expressions' part of the precompute runs on a second thread while this one
-        # sets up the transfer (both are numpy work that releases the GIL)
-        side = ThreadPoolExecutor(1)
-        examples_part = side.submit(self._example_rows, problem.examples - B0, F)
-        side.shutdown(wait=False)
-        self.dt = DeformationTransfer(tpl, problem.target_neutral, virtual_edges=problem.virtual_edges,
-                                      virtual_weight=opts.virtual_weight, virtual_mode=opts.virtual_mode)
+        dt = DeformationTransfer(tpl, problem.target_neutral, virtual_edges=problem.virtual_edges,
+                                 virtual_weight=options.virtual_weight, virtual_mode=options.virtual_mode)
         m_tri = len(F)
         # template frame deltas A_i^S - A_0^S (k, 3, 3, m_tri), computed once for eq. 3's prior and w_i
         dA = frames_cm(tpl.neutral + tpl.deltas, F)
-        dA -= self.dt.template_frames
+        dA -= dt.template_frames
         # eq. 3 prior: A~_i = Q_i A_0^B - A_0^B = (A_i^S - A_0^S) (A_0^S)^-1 A_0^B
-        self.A_tilde = to_triangle_major(self.dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6,
-                                                                                                  m_tri))  # (m_tri, 6, k)
-        self.w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], self.dt.template_frames, opts.mu,
-                                                             opts.sigma, opts.weight_measure))  # (m_tri, k)
+        A_tilde = to_triangle_major(dt.transferred_frame_deltas(frame_deltas=dA).reshape(tpl.n_shapes, 6,
+                                                                                         m_tri))  # (m_tri, 6, k)
+        w = np.ascontiguousarray(regularisation_weights(dA[:, :, :2], dt.template_frames, options.mu,
+                                                        options.sigma, options.weight_measure))  # (m_tri, k)
         # virtual-edge targets (Li et al. 2023) of every shape, from the template as in deformation transfer:
         # (k*3, e) with rows (shape, coordinate) -> (e, 3k) with columns (coordinate, shape)
-        vc = self.dt.virtual_edge_cols(frame_deltas=dA)
-        self.extra_targets = None if vc is None else np.ascontiguousarray(
+        vc = dt.virtual_edge_cols(frame_deltas=dA)
+        extra = None if vc is None else np.ascontiguousarray(
             vc.reshape(tpl.n_shapes, 3, -1).transpose(2, 1, 0)).reshape(vc.shape[1], -1)
         del dA
-        self.R, self.targets, self.target_sq = examples_part.result()
-        self.pairs = problem.pair_indices
-        self._weight_solver = None  # the CasADi model, built when first needed (ipopt option)
-        self._weight_solver_future = None  # ... or on a side thread while the alternations run
         # anchors keep the template's delta (zero at still vertices), as deformation transfer does;
         # rows (a, 3k) with columns (coordinate, shape)
-        av = self.dt.anchor_values()  # (k, a, 3)
-        self.anchor_rows = np.ascontiguousarray(av.transpose(1, 2, 0)).reshape(av.shape[1], -1)
-        self._transfer_rows = None
-        self.free = self._free_shapes()
-        self.precompute_seconds = time.perf_counter() - t0
-
-    @staticmethod
-    def _example_rows(E, F):
-        """The training expressions' precompute from their deltas ``E = T - B_0`` (m, n, 3): the
-        frame deltas ``A_j^T - A_0^B`` (only the two edge columns enter, and edges are linear in the
-        vertices, so they are the edges of ``T_j - B_0``) in the triangle-first layout (m_tri, 6, m);
-        ``t_j`` per coordinate, three (n, m) (the reconstruction's output is (n, 3k) with columns
-        (coordinate, shape), so the weight step's Gram matrices are three products of its slices);
-        ``||t_j||^2`` (m,)."""
-        with threadpool_limits(1):
-            return (training_rows(E, F), [np.ascontiguousarray(E[:, :, d].T) for d in range(3)],
-                    (E ** 2).sum(axis=(1, 2)))
+        av = dt.anchor_values()  # (k, a, 3)
+        anchors = np.ascontiguousarray(av.transpose(1, 2, 0)).reshape(av.shape[1], -1)
+        return cls(dt, A_tilde, w, extra, anchors)
 
     def reconstruct(self, rows) -> np.ndarray:
         """Vertex deltas from the basis step's frame rows (2, m_tri, 3, k): returns (n, 3k) with
         column ``d k + i`` = coordinate d of shape i."""
         two, m_tri, three, k = rows.shape
         return self.dt.poisson.solve_frame_rows(rows.reshape(2 * m_tri, 3 * k), self.anchor_rows, self.extra_targets)
+
+    @cached_property
+    def transfer_rows(self) -> np.ndarray:
+        """The deformation transfer of every template shape as vertex deltas (n, 3k) (the prior
+        A~ reconstructed; computed once, shared by every generator of this part)."""
+        k = self.A_tilde.shape[2]
+        return self.reconstruct(np.ascontiguousarray(self.A_tilde.reshape(-1, 3, 2, k).transpose(2, 0, 1, 3)))
+
+
+@dataclass(frozen=True, eq=False)
+class ExamplePart:
+    """What a run precomputes from the training expressions' deltas ``E = T - B_0`` (m, n, 3):
+
+    R : (m_tri, 6, m) frame deltas ``A_j^T - A_0^B`` (only the two edge columns enter, and edges are
+        linear in the vertices, so they are the edges of ``T_j - B_0``), triangle-first
+    targets : ``t_j`` per coordinate, three (n, m) (the reconstruction's output is (n, 3k) with
+        columns (coordinate, shape), so the weight step's Gram matrices are three products of its slices)
+    target_sq : (m,) ``||t_j||^2``
+    """
+
+    R: np.ndarray
+    targets: tuple
+    target_sq: np.ndarray
+
+    @classmethod
+    def build(cls, E, F) -> "ExamplePart":
+        with threadpool_limits(1):
+            return cls(training_rows(E, F), tuple(np.ascontiguousarray(E[:, :, d].T) for d in range(3)),
+                       (E ** 2).sum(axis=(1, 2)))
+
+    def subset(self, idx) -> "ExamplePart":
+        """The part of the training expressions ``idx`` (their rows, in that order)."""
+        return ExamplePart(np.ascontiguousarray(self.R[:, :, idx]),
+                           tuple(np.ascontiguousarray(T[:, idx]) for T in self.targets), self.target_sq[idx])
+
+
+#: ``BlendshapeGenerator(free=...)`` not given: decided from the problem and options
+_DECIDE = object()
+
+
+class BlendshapeGenerator:
+    """Precomputes everything a run needs once: transfer (frames, factorisation), the
+    deformation-transfer prior, regulariser weights (:class:`TemplatePart`), training frame deltas
+    (:class:`ExamplePart`) and the CasADi solver (built when first needed). The settings
+    (problem, options, the parts, the free shapes) are fixed when it is made; :meth:`subset` and
+    :meth:`with_options` make new generators that share the precompute.
+    """
+
+    def __init__(self, problem: GenerationProblem, options: GenerationOptions | None = None, *,
+                 template_part: TemplatePart | None = None, example_part: ExamplePart | None = None,
+                 free=_DECIDE, precompute_seconds: float | None = None):
+        t0 = time.perf_counter()
+        self.problem = problem
+        self.options = options or GenerationOptions()
+        examples_part = None
+        if example_part is None:
+            # the training expressions' part of the precompute runs on a second thread while this one
+            # sets up the transfer (both are numpy work that releases the GIL)
+            side = ThreadPoolExecutor(1)
+            examples_part = side.submit(ExamplePart.build, problem.examples - problem.target_neutral,
+                                        problem.template.faces)
+            side.shutdown(wait=False)
+        self.template_part = template_part or TemplatePart.build(problem, self.options)
+        self.example_part = example_part or examples_part.result()
+        self.pairs = problem.pair_indices
+        self._weight_solver = None  # the CasADi model, built when first needed (ipopt option)
+        self._weight_solver_future = None  # ... or on a side thread while the alternations run
+        self.free = self._free_shapes() if free is _DECIDE else free
+        self.precompute_seconds = (time.perf_counter() - t0) if precompute_seconds is None else precompute_seconds
+
+    # the precompute's arrays, by the names of the paper's quantities
+    dt = property(lambda self: self.template_part.dt)
+    A_tilde = property(lambda self: self.template_part.A_tilde)
+    w = property(lambda self: self.template_part.w)
+    R = property(lambda self: self.example_part.R)
+    targets = property(lambda self: self.example_part.targets)
+    target_sq = property(lambda self: self.example_part.target_sq)
+
+    def reconstruct(self, rows) -> np.ndarray:
+        """Vertex deltas (n, 3k) from the basis step's frame rows (2, m_tri, 3, k) (:meth:`TemplatePart.reconstruct`)."""
+        return self.template_part.reconstruct(rows)
 
     @staticmethod
     def deltas_of(Bv) -> np.ndarray:
@@ -155,13 +219,8 @@ class BlendshapeGenerator:
         return None if free.all() else free
 
     def transfer_rows(self) -> np.ndarray:
-        """The deformation transfer of every template shape as vertex deltas (n, 3k) (the prior
-        A~ reconstructed; computed once and shared with :meth:`subset` copies)."""
-        if getattr(self, "_transfer_rows", None) is None:
-            k = self.problem.template.n_shapes
-            rows = np.ascontiguousarray(self.A_tilde.reshape(-1, 3, 2, k).transpose(2, 0, 1, 3))
-            self._transfer_rows = self.reconstruct(rows)
-        return self._transfer_rows
+        """The deformation transfer of every template shape as vertex deltas (n, 3k) (:attr:`TemplatePart.transfer_rows`)."""
+        return self.template_part.transfer_rows
 
     def transfer_weights(self) -> np.ndarray:
         """(m, k) weights of the training expressions fitted to the deformation transfer (certified,
@@ -177,33 +236,22 @@ class BlendshapeGenerator:
     def subset(self, indices) -> "BlendshapeGenerator":
         """The generator of the training expressions ``indices`` only, sharing the template's
         precompute (transfer, prior, regulariser weights), for cross-validation."""
-        import copy
-        import dataclasses
-
         idx = np.asarray(indices, dtype=np.int64)
         p = self.problem
-        g = copy.copy(self)
-        g.problem = dataclasses.replace(p, examples=p.examples[idx], initial_weights=p.initial_weights[idx],
-                                        example_names=tuple(p.example_names[i] for i in idx))
-        g.R = np.ascontiguousarray(self.R[:, :, idx])
-        g.targets = [np.ascontiguousarray(T[:, idx]) for T in self.targets]
-        g.target_sq = self.target_sq[idx]
-        g._weight_solver = None
-        g._weight_solver_future = None
-        g.free = g._free_shapes()
-        return g
+        sub = dataclasses.replace(p, examples=p.examples[idx], initial_weights=p.initial_weights[idx],
+                                  example_names=tuple(p.example_names[i] for i in idx))
+        return BlendshapeGenerator(sub, self.options, template_part=self.template_part,
+                                   example_part=self.example_part.subset(idx),
+                                   precompute_seconds=self.precompute_seconds)
 
-    def with_options(self, options: "GenerationOptions") -> "BlendshapeGenerator":
+    def with_options(self, options: GenerationOptions) -> "BlendshapeGenerator":
         """The same generator with other schedule options (alpha, lambda, iterations, ipopt); the
-        precompute does not depend on them."""
-        import copy
-
-        g = copy.copy(self)
-        g.options = options
-        g._weight_solver = None
-        g._weight_solver_future = None
-        g.free = g._free_shapes()
-        return g
+        precompute does not depend on them (nor do the free shapes unless ``unobserved`` or
+        ``support`` change)."""
+        same = (options.unobserved, options.support) == (self.options.unobserved, self.options.support)
+        return BlendshapeGenerator(self.problem, options, template_part=self.template_part,
+                                   example_part=self.example_part, free=self.free if same else _DECIDE,
+                                   precompute_seconds=self.precompute_seconds)
 
     @property
     def weight_solver(self) -> WeightSolver:
@@ -263,24 +311,22 @@ class BlendshapeGenerator:
         ``alpha="auto"`` first chooses the schedule by cross-validation (:mod:`.crossval`; the
         alternations are then those of :meth:`~.crossval.CrossValidation.final_schedule`);
         ``X0`` (m, k) starts from other weights than the rough ones (a warm start);
-        ``schedule`` is a list of (alpha, lambda), one per alternation.
+        ``schedule`` is a list of (alpha, lambda), one per alternation. The generator is not
+        changed: the options the run settled on (``alpha="auto"`` resolved) are ``result.options``.
         """
         t_start = time.perf_counter()
-        crossval = None
-        done = []  # alternations already made (the "deletion" cross-validation's path)
-        if schedule is None and self.options.auto_alpha:
-            from .crossval import cross_validate_alpha
-
+        p, opts = self.problem, self.options
+        crossval, done = None, []  # done: alternations already made (the "deletion" cross-validation's path)
+        if schedule is None and opts.auto_alpha:
             crossval = cross_validate_alpha(self, progress=cv_progress)
             # the final run is made the way the curve scored the chosen alpha (crossval.final_schedule)
-            schedule = crossval.final_schedule(self.options)
-            self.options = dataclasses.replace(self.options, alpha=crossval.schedule)
+            schedule = crossval.final_schedule(opts)
+            opts = dataclasses.replace(opts, alpha=crossval.schedule)
             if crossval.final_state is not None:  # "deletion": the path on all expressions is there up to
                 # the chosen alpha's last alternation; that one is run here (with IPOPT as the options say)
                 X0 = crossval.final_state["X"]
                 done = list(crossval.final_state["history"])
                 schedule = schedule[len(done):]
-        p, opts = self.problem, self.options
         X = p.initial_weights.copy() if X0 is None else np.array(X0, dtype=np.float64)  # (m, k)
         if X.shape != p.initial_weights.shape:
             raise InputError(f"X0: expected shape {p.initial_weights.shape}, found {X.shape}")
@@ -293,7 +339,7 @@ class BlendshapeGenerator:
 
             def progress(rec, total):
                 shown(dataclasses.replace(rec, iteration=offset + rec.iteration), offset + total)
-        workers = opts.threads or _available_cores()
+        workers = opts.threads or available_cores()
         pool = ThreadPoolExecutor(workers) if workers > 1 else None
         try:
             history, X, deltas = self._iterate(X, schedule, pool, progress)
@@ -303,12 +349,10 @@ class BlendshapeGenerator:
             if pool is not None:
                 pool.shutdown()
         rig = Rig(p.target_neutral, p.template.faces, p.template.names, deltas, source="example-based generation")
-        residuals = relative_residuals(rig, p.examples, X)
-        missing = tuple(n for n, r in zip(p.example_names, residuals) if r > opts.missing_threshold)
-        return GenerationResult(rig=rig, weights=X, history=tuple(history), residuals=residuals, missing=missing,
-                                example_names=p.example_names, seconds=time.perf_counter() - t_start,
-                                precompute_seconds=self.precompute_seconds, options=opts,
-                                unobserved=self.unobserved, crossval=crossval)
+        return GenerationResult.from_weights(rig, X, p, opts, history=tuple(history),
+                                             seconds=time.perf_counter() - t_start,
+                                             precompute_seconds=self.precompute_seconds, unobserved=self.unobserved,
+                                             crossval=crossval)
 
     def _iterate(self, X, schedule, pool, progress):
         history = []
@@ -343,21 +387,6 @@ def _prior_term(sol) -> float:
     return float(np.sum(P.lam * np.einsum("jk,jk->j", D, D)))
 
 
-def _available_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
-def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """``||B_0 + sum_i x_ij B_i - T_j|| / ||T_j - B_0||`` for every example, (m,)."""
-    fit = rig.evaluate(X)
-    num = np.linalg.norm((fit - examples).reshape(len(examples), -1), axis=1)
-    den = np.linalg.norm((examples - rig.neutral).reshape(len(examples), -1), axis=1)
-    return num / np.maximum(den, 1e-300)
-
-
 def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions | None = None,
                          progress=None, *, contact: bool = False, contact_exclude=(),
                          allow_target_pairs: bool = False) -> GenerationResult:
@@ -371,7 +400,6 @@ def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions 
     """
     if contact:  # the contact inputs are checked before any solving starts
         from ..contact.exact import check_contact_inputs
-        from .contactstep import contact_generation
 
         check_contact_inputs(problem.template, problem.target_neutral, contact_exclude, allow_target_pairs)
     elif contact_exclude or allow_target_pairs:
@@ -384,22 +412,4 @@ def generate_blendshapes(problem: GenerationProblem, options: GenerationOptions 
     return res
 
 
-def refit_weights(rig: Rig, expressions: np.ndarray, pairs=(), lam: float = 0.0, prior=None,
-                  solver: WeightSolver | None = None) -> WeightSolution:
-    """Fit weights of given expressions (m, n, 3) to a rig (eq. 5 with an optional prior)."""
-    problem = WeightProblem.from_rig(rig, expressions, pairs, prior, lam)
-    solver = solver or WeightSolver(rig.n_shapes, problem.m, problem.pairs)
-    return solver.solve_problem(problem)
-
-
-def reproduction_error(rig: Rig, expressions: np.ndarray, pairs=(), solver: WeightSolver | None = None) -> float:
-    """How well ``rig`` reproduces expressions (h, n, 3) with refitted weights (bounds, complementarity,
-    no prior): ``||B_0 + B x - T|| / ||T - B_0||`` over all of them. Compares rigs fairly, since a
-    shape's amplitude and its weight trade off (method.md A)."""
-    sol = refit_weights(rig, expressions, pairs, solver=solver)
-    return float(np.linalg.norm(rig.evaluate(sol.weights) - expressions) / np.linalg.norm(expressions - rig.neutral))
-
-
-__all__ = ["GenerationProblem", "GenerationOptions", "GenerationResult", "IterationRecord", "BlendshapeGenerator",
-           "generate_blendshapes", "basis_step", "basis_rows", "basis_energies", "regularisation_weights", "relative_residuals",
-           "refit_weights", "reproduction_error", "eq5_objective"]
+__all__ = ["BlendshapeGenerator", "TemplatePart", "ExamplePart", "generate_blendshapes"]

@@ -16,12 +16,13 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from ..geometry.mesh import validate_vertices
 from ..geometry.rig import Rig
 
@@ -100,6 +101,16 @@ class GenerationProblem:
             return np.zeros((0, 2), dtype=np.int64)
         return np.array([self.template.index([a, b]) for a, b in self.exclusive])
 
+    def pairs_used_together(self) -> list[tuple[tuple[str, str], list[str]]]:
+        """Exclusive pairs whose two shapes both have rough weights > 0 in some examples, with the
+        names of those examples (the weight step keeps only one of the two in each)."""
+        out = []
+        for pair, (ia, ib) in zip(self.exclusive, self.pair_indices):
+            both = [n for n, row in zip(self.example_names, self.initial_weights) if row[ia] > 0 and row[ib] > 0]
+            if both:
+                out.append((pair, both))
+        return out
+
 
 #: what a shape that no training expression activates becomes: its deformation transfer (its
 #: weights held at 0), or fitted like every other shape
@@ -109,6 +120,9 @@ UNOBSERVED_MODES = ("transfer", "fit")
 #: polish); the other alternations use the certified solver alone, which returns the same optimum
 IPOPT_MODES = ("every", "final", "never")
 
+#: how ``alpha="auto"`` makes and scores its candidates (:mod:`facebasis.rigging.crossval`)
+CV_CANDIDATES = ("coarse", "deletion", "path", "cold", "both")
+
 
 @dataclass(frozen=True)
 class GenerationOptions:
@@ -117,9 +131,9 @@ class GenerationOptions:
     alpha and lambda go geometrically from their first to their last value over the iterations.
     ``alpha="auto"`` chooses the alpha schedule ``(5 a, a)`` (the paper's ratio) by k-fold
     cross-validation over the training expressions (:mod:`facebasis.rigging.crossval`; ``cv_folds``,
-    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"deletion"``, ``"path"``, ``"cold"`` or ``"both"``,
-    ``cv_chain_iterations``); the final run is made the way the chosen candidate was (with
-    ``"path"``: the warm-started path down to it).
+    ``cv_grid`` the candidate final alphas, ``cv_candidates`` ``"coarse"`` (default),
+    ``"deletion"``, ``"path"``, ``"cold"`` or ``"both"``, ``cv_chain_iterations``); the final run
+    is made the way the chosen candidate was (with ``"path"``: the warm-started path down to it).
 
     ``unobserved``: a shape whose rough weights stay below ``support`` in every training
     expression has no support in the examples. With ``"transfer"`` (default) its weights are held
@@ -155,23 +169,24 @@ class GenerationOptions:
     cv_folds: int = 4
     cv_grid: tuple[float, ...] = ()
     cv_chain_iterations: int = 2
-    cv_candidates: str = "deletion"
+    cv_candidates: str = "coarse"
 
     def __post_init__(self):
+        # the errors name their field (structured: an application writes it by its own name for it)
         if int(self.iterations) < 1:
-            raise InputError(f"iterations: expected >= 1, found {self.iterations}")
+            raise parameter_error("iterations", ">= 1", self.iterations)
         auto = isinstance(self.alpha, str)
         if auto and self.alpha != "auto":
-            raise InputError(f"alpha: expected two numbers (first, last) or 'auto', found {self.alpha!r}")
+            raise parameter_error("alpha", "two numbers (first, last) or 'auto'", repr(self.alpha))
         for name in ("lam",) if auto else ("alpha", "lam"):
             v = tuple(float(a) for a in getattr(self, name))
             if len(v) != 2 or not all(np.isfinite(v)):
-                raise InputError(f"{name}: expected two finite values (first, last), found {getattr(self, name)}")
+                raise parameter_error(name, "two finite values (first, last)", getattr(self, name))
             object.__setattr__(self, name, v)
         if not auto and min(self.alpha) <= 0:
-            raise InputError(f"alpha: expected values > 0, found {self.alpha}")
+            raise parameter_error("alpha", "values > 0", self.alpha)
         if min(self.lam) < 0:
-            raise InputError(f"lambda: expected values >= 0, found {self.lam}")
+            raise parameter_error("lam", "values >= 0", self.lam, label="lambda")
         if self.weight_measure not in ("relative", "absolute"):
             raise InputError(f"weight_measure: expected 'relative' or 'absolute', found {self.weight_measure!r}")
         if self.threads is not None and int(self.threads) < 1:
@@ -179,20 +194,20 @@ class GenerationOptions:
         if not (0 < self.mu < 1) or self.sigma < 0:
             raise InputError(f"mu, sigma: expected 0 < mu < 1 and sigma >= 0, found {self.mu}, {self.sigma}")
         if self.ipopt not in IPOPT_MODES:
-            raise InputError(f"ipopt: expected one of {', '.join(IPOPT_MODES)}, found {self.ipopt!r}")
+            raise parameter_error("ipopt", f"one of {', '.join(IPOPT_MODES)}", repr(self.ipopt))
         if self.unobserved not in UNOBSERVED_MODES:
-            raise InputError(f"unobserved: expected one of {', '.join(UNOBSERVED_MODES)}, found {self.unobserved!r}")
+            raise parameter_error("unobserved", f"one of {', '.join(UNOBSERVED_MODES)}", repr(self.unobserved))
         if not (np.isfinite(self.support) and 0.0 <= self.support <= 1.0):
-            raise InputError(f"support: expected a rough weight in [0, 1], found {self.support}")
+            raise parameter_error("support", "a rough weight in [0, 1]", self.support)
         if int(self.cv_folds) < 2:
-            raise InputError(f"cv_folds: expected >= 2, found {self.cv_folds}")
+            raise parameter_error("cv_folds", ">= 2", self.cv_folds)
         if int(self.cv_chain_iterations) < 1:
-            raise InputError(f"cv_chain_iterations: expected >= 1, found {self.cv_chain_iterations}")
-        if self.cv_candidates not in ("deletion", "path", "cold", "both"):  # crossval.CANDIDATE_MODES
-            raise InputError(f"cv_candidates: expected one of deletion, path, cold, both, found {self.cv_candidates!r}")
+            raise parameter_error("cv_chain_iterations", ">= 1", self.cv_chain_iterations)
+        if self.cv_candidates not in CV_CANDIDATES:
+            raise parameter_error("cv_candidates", f"one of {', '.join(CV_CANDIDATES)}", repr(self.cv_candidates))
         grid = tuple(float(a) for a in self.cv_grid)
         if any(not np.isfinite(a) or a <= 0 for a in grid):
-            raise InputError(f"cv_grid: expected final alphas > 0, found {self.cv_grid}")
+            raise parameter_error("cv_grid", "final alphas > 0", self.cv_grid)
         object.__setattr__(self, "cv_grid", grid)
         if not self.polish and self.ipopt != "every":
             raise InputError(f"polish: expected True unless ipopt='every' (IPOPT's raw answers), found polish=False "
@@ -267,6 +282,30 @@ class GenerationResult:
     crossval: object | None = None
     contact: object | None = None
 
+    @classmethod
+    def from_weights(cls, rig: Rig, weights: np.ndarray, problem: GenerationProblem,
+                     options: "GenerationOptions | None", **fields) -> "GenerationResult":
+        """The one constructor of a run's result: ``rig`` and the training weights (m, k) of
+        ``problem``'s expressions, with the relative residuals (:func:`relative_residuals`) and the
+        expressions above ``options.missing_threshold`` computed here; ``fields`` are the other
+        attributes (``history``, ``seconds``, ``precompute_seconds``, ``unobserved``, ...)."""
+        weights = np.asarray(weights, np.float64)
+        residuals = relative_residuals(rig, problem.examples, weights)
+        threshold = options.missing_threshold if options is not None else np.inf
+        missing = tuple(n for n, r in zip(problem.example_names, residuals) if r > threshold)
+        fields.setdefault("history", ())
+        fields.setdefault("seconds", 0.0)
+        fields.setdefault("precompute_seconds", 0.0)
+        return cls(rig=rig, weights=weights, residuals=residuals, missing=missing,
+                   example_names=problem.example_names, options=options, **fields)
+
+    def with_weights(self, rig: Rig, weights: np.ndarray, problem: GenerationProblem) -> "GenerationResult":
+        """This result with another rig and weights of ``problem``'s expressions (e.g. after exact
+        contact); residuals and missing expressions are computed again, the rest is kept."""
+        keep = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name not in ("rig", "weights", "residuals", "missing", "example_names", "options")}
+        return GenerationResult.from_weights(rig, weights, problem, self.options, **keep)
+
     @property
     def final_step(self) -> tuple[float, float]:
         """(alpha, lambda) of the last alternation run: the lambda the stored weights were solved at
@@ -284,3 +323,15 @@ class GenerationResult:
     @property
     def all_ipopt_succeeded(self) -> bool:
         return all(h.ipopt_success for h in self.history)
+
+
+def relative_residuals(rig: Rig, examples: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``||B_0 + sum_i x_ij B_i - T_j|| / ||T_j - B_0||`` for every example, (m,)."""
+    fit = rig.evaluate(X)
+    num = np.linalg.norm((fit - examples).reshape(len(examples), -1), axis=1)
+    den = np.linalg.norm((examples - rig.neutral).reshape(len(examples), -1), axis=1)
+    return num / np.maximum(den, 1e-300)
+
+
+__all__ = ["GenerationProblem", "GenerationOptions", "GenerationResult", "IterationRecord", "relative_residuals",
+           "IPOPT_MODES", "UNOBSERVED_MODES", "CV_CANDIDATES"]

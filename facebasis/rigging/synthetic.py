@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .generation import GenerationProblem
+from .problem import GenerationProblem
 from ..geometry.rig import Rig
 
 

@@ -193,7 +193,8 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
     for a, b in extra:
         rig.index([a, b], what=f"--exclusive {a}:{b}")
         if a == b:
-            raise InputError(f"--exclusive {a}:{b}: expected two different shapes, found one twice")
+            raise InputError(what=f"{{exclusive}} {a}:{b}", expected="two different shapes", found="one twice",
+                             params={"exclusive": "exclusive"})
     problem = WeightProblem.from_rig(rig, T, pairs, prior, lam)
     # shapes the run held at 0 (no support in the examples) stay at 0: certify over the others
     sub, idx = problem.restrict(free)

@@ -17,7 +17,9 @@ when it is made) and is the one place where the objective, the complementarity a
 residuals and the checks of the exclusive pairs are written; :class:`WeightSolution` keeps its
 problem and computes its residuals from it, whichever solver produced it (the certified branch and
 bound of :mod:`facebasis.rigging.certify`, the CasADi/IPOPT model of
-:mod:`facebasis.rigging.weights`).
+:mod:`facebasis.rigging.weights`). Those are the two solves of the weight step, both
+``problem -> WeightSolution``: :func:`facebasis.rigging.certify.certify_problem` and
+:meth:`facebasis.rigging.weights.WeightSolver.solve_problem`.
 
 Array conventions: ``G`` (k, k); ``c`` (m, k), row j = ``B^T t_j``; ``const`` (m,); ``prior``
 (m, k), the rough weights ``x~`` (zeros if not given); ``pairs`` (P, 2) shape indices; weights
@@ -99,7 +101,7 @@ def bound_violation(X) -> float:
 
 def gram_data(rig, expressions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The Gram quantities of eq. 5 for expressions (m, n, 3) against a rig's blendshapes:
-    ``G = B^T B`` (k, k), ``C = B^T t_j`` (k, m) and ``const = t_j^T t_j`` (m,), with
+    ``G = B^T B`` (k, k), ``c`` (m, k) with row j ``B^T t_j`` and ``const = t_j^T t_j`` (m,), with
     ``t_j = T_j - B_0`` flattened; BLAS on one thread (its spinning threads cost more than they
     gain for these sizes on a shared machine)."""
     from threadpoolctl import threadpool_limits
@@ -111,7 +113,7 @@ def gram_data(rig, expressions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     B = rig.deltas.reshape(rig.n_shapes, -1)
     with threadpool_limits(1):
         G, C = B @ B.T, B @ T.T
-    return G, C, np.einsum("ij,ij->i", T, T)
+    return G, C.T, np.einsum("ij,ij->i", T, T)
 
 
 def _as_float(a, name):
@@ -271,8 +273,8 @@ class WeightProblem:
     @classmethod
     def from_rig(cls, rig, expressions, pairs=(), prior=None, lam: float = 0.0) -> WeightProblem:
         """Eq. 5 for expressions (m, n, 3) against ``rig``'s blendshapes (:func:`gram_data`)."""
-        G, C, const = gram_data(rig, expressions)
-        return cls(G, C.T, const, pairs, prior, lam)
+        G, c, const = gram_data(rig, expressions)
+        return cls(G, c, const, pairs, prior, lam)
 
     def with_examples(self, c, const, prior=None) -> WeightProblem:
         """The same G, pairs and lambda (not checked again) with other examples (checked)."""
@@ -386,34 +388,5 @@ def _largest(r) -> float:
     return float(r.max()) if r.size else 0.0
 
 
-@dataclass(frozen=True, eq=False)
-class WeightInstance:
-    """A named one-example :class:`WeightProblem` of the weight-problem suite (``problems/weights_suite.py``),
-    with its optimum ``known_objective`` if known in closed form; the maths are the problem's."""
-
-    name: str
-    kind: str
-    problem: WeightProblem
-    known_objective: float | None = None
-
-    @classmethod
-    def make(cls, name, kind, G, c, const, prior, lam, pairs, known_objective=None) -> WeightInstance:
-        """From one example's data: G (k, k), c (k,), const, prior (k,), lam, pairs (P, 2)."""
-        return cls(name, kind, WeightProblem(G, c, const, pairs, prior, lam), known_objective)
-
-    k = property(lambda self: self.problem.k, doc="number of shapes")
-    pairs = property(lambda self: self.problem.pairs, doc="(P, 2) exclusive pairs")
-
-    def objective(self, x) -> float:
-        """Eq. 5 at x (k,)."""
-        return float(self.problem.objective(x)[0])
-
-    def certify(self, start=None, **kw):
-        """Certified optimum (:func:`facebasis.rigging.certify.certified_weights`)."""
-        from .certify import certified_weights
-
-        return certified_weights(self.problem, start=start, **kw)
-
-
-__all__ = ["WeightProblem", "WeightSolution", "WeightInstance", "IPOPT_NOT_RUN", "check_pairs", "pair_products",
+__all__ = ["WeightProblem", "WeightSolution", "IPOPT_NOT_RUN", "check_pairs", "pair_products",
            "bound_excess", "complementarity_violation", "bound_violation", "gram_data"]

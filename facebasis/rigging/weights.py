@@ -21,8 +21,9 @@ certificate (nodes, gap, KKT residual) are all reported.
 
 The problem's data, objective and residuals are :class:`~facebasis.rigging.weightproblem.WeightProblem`'s,
 the answer a :class:`~facebasis.rigging.weightproblem.WeightSolution` of it: this module only adds
-the CasADi/IPOPT model (:meth:`WeightSolver.solve_problem`) and the array-level entry points the
-generator calls (:meth:`WeightSolver.solve`, :func:`solve_certified`, :func:`certified_examples`).
+the CasADi/IPOPT model, the IPOPT solve of a weight step (:meth:`WeightSolver.solve_problem`); the
+certified solve of the same problem is :func:`facebasis.rigging.certify.certify_problem`. The
+model is the one place where eq. 5 is written symbolically.
 
 References
 ----------
@@ -37,27 +38,13 @@ import time
 
 import numpy as np
 
-from .certify import CertifiedWeightSolver, certify_problem  # noqa: F401 (re-exported)
-from .weightproblem import (  # noqa: F401 (re-exported)
-    IPOPT_NOT_RUN, WeightProblem, WeightSolution, bound_violation, check_pairs, complementarity_violation, gram_data,
-)
+from .certify import certify_problem
+from .weightproblem import WeightProblem, WeightSolution, check_pairs
 from ..errors import InputError, SolverError
 from ..interrupt import interruptible
 
 #: IPOPT return statuses that count as a successful solve.
 IPOPT_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
-
-
-def _problem(G, C, const, X_prior, lam, pairs) -> WeightProblem:
-    """The :class:`WeightProblem` of the array arguments below (C (k, m), one column per example)."""
-    C = np.asarray(C, float)
-    return WeightProblem(G, C.T if C.ndim == 2 else C, const, pairs, X_prior, lam)
-
-
-def eq5_objective(X, G, C, const, X_prior, lam) -> float:
-    """Eq. 5 objective for weights X (m, k), G (k, k), C (k, m), const (m,) = t_j^T t_j
-    (:meth:`WeightProblem.total_objective`)."""
-    return _problem(G, C, const, X_prior, lam, ()).total_objective(X)
 
 
 class WeightSolver:
@@ -107,35 +94,27 @@ class WeightSolver:
         self._nlp = nlp
         self._solver = ca.nlpsol("weights", "ipopt", nlp, opts)
 
-    def solve(self, G, C, const, X_prior, lam: float, X0=None, free=None) -> WeightSolution:
-        """Solve eq. 5.
+    def solve_problem(self, problem: WeightProblem, X0=None, free=None) -> WeightSolution:
+        """The IPOPT solve of a weight step: eq. 5 for ``problem`` (its k, m and pairs must be the model's).
 
         Parameters
         ----------
-        G : (k, k) Gram matrix ``B^T B``
-        C : (k, m) ``B^T t_j`` for every example
-        const : (m,) ``t_j^T t_j``
-        X_prior : (m, k) rough weights ``x~``
-        lam : prior weight lambda >= 0
-        X0 : (m, k) starting point (default: ``X_prior`` clipped to [0, 1])
+        problem : :class:`WeightProblem` of m examples and k shapes
+        X0 : (m, k) starting point (default: the problem's prior clipped to [0, 1])
         free : optional (k,) bool, the weights that may be nonzero (the others are fixed at 0)
+
+        Returns
+        -------
+        :class:`WeightSolution` of ``problem``: with ``polish``, the certified optimum of every
+        example seeded by IPOPT's answer (which the solution keeps as ``ipopt_X``).
 
         Raises
         ------
         InputError
-            malformed data (:class:`WeightProblem`'s checks) or sizes other than the model's
+            a problem of other sizes or pairs than the model's
         SolverError
             IPOPT fails and no polish is requested; the message carries IPOPT's status.
         """
-        k, m = self.k, self.m
-        shapes = tuple(np.shape(a) for a in (G, C, X_prior))
-        if shapes != ((k, k), (k, m), (m, k)):
-            raise InputError(f"weight step: expected G {(k, k)}, C {(k, m)}, prior {(m, k)}, found "
-                             f"{', '.join(map(str, shapes))}")
-        return self.solve_problem(_problem(G, C, const, X_prior, lam, self.pairs), X0, free)
-
-    def solve_problem(self, problem: WeightProblem, X0=None, free=None) -> WeightSolution:
-        """Solve ``problem`` (its k, m and pairs must be the model's); X0, free as in :meth:`solve`."""
         t0 = time.perf_counter()
         k, m = self.k, self.m
         if (problem.k, problem.m) != (k, m) or not np.array_equal(problem.pairs, self.pairs):
@@ -173,28 +152,4 @@ class WeightSolver:
                               **info)
 
 
-def certified_examples(G, C, const, X_prior, lam, pairs, start=None, free=None):
-    """Certified global optimum of eq. 5 for every example (they are independent given G).
-
-    :func:`~facebasis.rigging.certify.certify_problem` on the :class:`WeightProblem` of the
-    arrays (C (k, m)), optionally seeded per example with ``start`` (m, k). ``free`` (k,) bool:
-    only these weights may be nonzero (the others are fixed at 0, their pairs hold trivially).
-    Returns (weights (m, k), max KKT residual, total nodes, max gap).
-    """
-    sol = certify_problem(_problem(G, C, const, X_prior, lam, pairs), start=start, free=free)
-    return sol.X, sol.kkt_residual, sol.certificate_nodes, sol.certificate_gap
-
-
-def solve_certified(G, C, const, X_prior, lam: float, pairs=(), free=None) -> WeightSolution:
-    """Eq. 5 by the certified solver alone (no IPOPT): the global optimum of every example.
-
-    The answer is what :meth:`WeightSolver.solve` returns after its polish (the certified optimum
-    does not depend on IPOPT's seed), without the joint IPOPT solve; the IPOPT fields of the
-    solution say so (status :data:`IPOPT_NOT_RUN`, 0 iterations, NaN objective and violations,
-    ``ipopt_success`` True since nothing failed). ``free``: see :func:`certified_examples`.
-    """
-    return certify_problem(_problem(G, C, const, X_prior, lam, pairs), free=free)
-
-
-__all__ = ["WeightSolver", "WeightSolution", "WeightProblem", "solve_certified", "certified_examples",
-           "eq5_objective", "gram_data", "IPOPT_OK", "IPOPT_NOT_RUN"]
+__all__ = ["WeightSolver", "IPOPT_OK"]

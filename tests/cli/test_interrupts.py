@@ -41,18 +41,21 @@ def test_an_interrupt_swallowed_inside_the_block_is_raised_when_it_ends():
 def test_ctrl_c_inside_ipopt_stops_the_weight_step():
     """A real SIGINT while IPOPT runs (a 10,600-variable problem that takes seconds) ends in
     KeyboardInterrupt, not in a failure status that the certified polish would paper over."""
+    from facebasis.rigging.weightproblem import WeightProblem
     from facebasis.rigging.weights import WeightSolver
 
     rng = np.random.default_rng(0)
     k, m = 53, 200
     B = rng.normal(size=(300, k))
     T = rng.normal(size=(300, m))
-    solver = WeightSolver(k, m, [(i, i + 1) for i in range(0, 20, 2)])
+    pairs = [(i, i + 1) for i in range(0, 20, 2)]
+    solver = WeightSolver(k, m, pairs)
+    problem = WeightProblem(B.T @ B, (B.T @ T).T, (T * T).sum(0), pairs, np.full((m, k), 0.5), 1.0)
     timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     try:
         with pytest.raises(KeyboardInterrupt):
-            solver.solve(B.T @ B, B.T @ T, (T * T).sum(0), np.full((m, k), 0.5), 1.0)
+            solver.solve_problem(problem)
     finally:
         timer.cancel()
 

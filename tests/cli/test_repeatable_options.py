@@ -218,7 +218,7 @@ def test_help_is_plain_words():
 def test_a_value_repeated_within_a_repeatable_option_is_kept_once_and_said(tmp_path, capsys):
     """``--contact-exclude jawOpen jawOpen`` and ``--cv-grid 0.1 0.1,0.1`` keep the value once (no
     duplicate candidates, no doubled names) and say so."""
-    from facebasis.cli.rigging import _cv_grid
+    from facebasis.cli.rig import cv_grid as _cv_grid
 
     assert _cv_grid(["0.1", "0.1,0.3", "0.1"]) == (0.1, 0.3)
     assert "note: --cv-grid 0.1 given more than once: used once" in capsys.readouterr().err

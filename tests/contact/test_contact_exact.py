@@ -158,7 +158,8 @@ def test_generated_shapes_are_corrected_by_the_smallest_displacement():
 def generated_two_sheets():
     """``contact_generation``'s inputs on the two sheets: a generator whose examples come from a person
     pushing the top sheet through the bottom one (1.3 x the plain transfer), and its result."""
-    from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationOptions
     from facebasis.rigging.problem import GenerationProblem
 
     rig = two_sheets()
@@ -443,7 +444,8 @@ def test_generate_blendshapes_contact_api():
     inputs are checked before generation, the result carries the ContactResult and certified weights."""
     from facebasis.errors import RigError
     from facebasis.rigging.certify import certify_problem
-    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.problem import GenerationOptions
+    from facebasis.rigging.generation import generate_blendshapes
     from facebasis.rigging.synthetic import default_face_problem
     from facebasis.rigging.weightproblem import WeightProblem
 
@@ -478,7 +480,7 @@ def test_generate_blendshapes_contact_api():
 
 def test_cli_verdict_names_shapes_pulled_back_by_the_last_resort(capsys):
     """The command says which shapes the last resort pulled back, and still reports the exact check."""
-    from facebasis.cli.rigging import _contact_verdict
+    from facebasis.cli.exact_contact import contact_verdict as _contact_verdict
     from facebasis.contact.solver import ContactResult, ContactShape
 
     shapes = (ContactShape("jawOpen", plain_new_pairs=4, retreated=37, retreat_loss=0.125),

@@ -27,7 +27,8 @@ def linted(monkeypatch):
 
 @pytest.fixture(scope="module")
 def rig_run(tmp_path_factory):
-    from facebasis.rigging.generation import GenerationOptions, generate_blendshapes
+    from facebasis.rigging.problem import GenerationOptions
+    from facebasis.rigging.generation import generate_blendshapes
     from facebasis.rigging.runs import write_problem_inputs, write_rig_run
     from facebasis.rigging.synthetic import default_face_problem
 

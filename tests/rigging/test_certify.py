@@ -4,10 +4,24 @@ import numpy as np
 import pytest
 
 from facebasis.rigging.boxqp import box_qp_kkt, solve_box_qp
-from facebasis.rigging.certify import brute_force_weights, certified_weights, weight_objective
+from facebasis.rigging.certify import brute_force_weights, certified_weights
+from facebasis.rigging.weightproblem import WeightProblem
 from facebasis.errors import InputError, SolverError
 from facebasis.rigging.formulations import FORMULATIONS, FormulationSolver
 from problems.weights_suite import closed_form_instances, weight_suite
+
+
+def _certified(G, c, const, pairs=(), prior=None, lam=0.0, **kw):
+    """The certified solve of one example given by its arrays (its WeightProblem checks them)."""
+    return certified_weights(WeightProblem(G, c, const, pairs, prior, lam), **kw)
+
+
+def _brute(G, c, const, pairs=(), prior=None, lam=0.0):
+    return brute_force_weights(WeightProblem(G, c, const, pairs, prior, lam))
+
+
+def _objective(x, G, c, const, prior=None, lam=0.0):
+    return float(WeightProblem(G, c, const, (), prior, lam).objective(x)[0])
 
 
 def test_box_qp_is_exact_on_random_problems():
@@ -37,7 +51,7 @@ def test_closed_form_instances_are_solved_exactly(inst):
 
 def test_prior_pulling_both_weights_keeps_one():
     """Closed form: G = I, no data, prior 0.9 on both, lambda 1 -> one weight 0.45, the other 0."""
-    cs = certified_weights(np.eye(2), np.zeros(2), 0.0, [(0, 1)], prior=[0.9, 0.9], lam=1.0)
+    cs = _certified(np.eye(2), np.zeros(2), 0.0, [(0, 1)], prior=[0.9, 0.9], lam=1.0)
     assert sorted(cs.x.tolist()) == pytest.approx([0.0, 0.45], abs=1e-12)
     assert min(cs.x) == 0.0
 
@@ -55,12 +69,12 @@ def test_branch_and_bound_agrees_with_brute_force(seed):
     # disjoint pairs plus an overlapping chain (0,1), (1,2)
     pairs = [(0, 1), (1, 2), (3, 4), (5, 6), (7, 8)]
     G, c, const, prior, lam = _random_instance(rng, k, pairs, lam=[0.0, 1.0, 10.0][seed % 3])
-    cs = certified_weights(G, c, const, pairs, prior, lam)
-    x, f, branches = brute_force_weights(G, c, const, pairs, prior, lam)
+    cs = _certified(G, c, const, pairs, prior, lam)
+    x, f, branches = _brute(G, c, const, pairs, prior, lam)
     assert branches == 2 ** len(pairs)
     assert cs.certified and cs.gap <= 1e-9 * (1 + abs(f))
     assert cs.objective == pytest.approx(f, rel=1e-10, abs=1e-10)
-    assert weight_objective(cs.x, G, c, const, prior, lam) == pytest.approx(cs.objective, rel=1e-12)
+    assert _objective(cs.x, G, c, const, prior, lam) == pytest.approx(cs.objective, rel=1e-12)
     assert cs.max_complementarity == 0.0 and cs.max_bound_violation == 0.0
     assert cs.lower_bound <= cs.objective
 
@@ -68,9 +82,9 @@ def test_branch_and_bound_agrees_with_brute_force(seed):
 def test_start_point_never_makes_it_worse():
     rng = np.random.default_rng(3)
     G, c, const, prior, lam = _random_instance(rng, 8, [(0, 1), (2, 3)], 1.0)
-    ref = certified_weights(G, c, const, [(0, 1), (2, 3)], prior, lam)
+    ref = _certified(G, c, const, [(0, 1), (2, 3)], prior, lam)
     for _ in range(5):
-        cs = certified_weights(G, c, const, [(0, 1), (2, 3)], prior, lam, start=rng.uniform(0, 1, 8))
+        cs = _certified(G, c, const, [(0, 1), (2, 3)], prior, lam, start=rng.uniform(0, 1, 8))
         assert cs.objective == pytest.approx(ref.objective, rel=1e-12)
 
 
@@ -115,10 +129,10 @@ def test_polished_weight_step_is_the_certified_optimum(default_suite):
 
     insts = [i for i in default_suite if i.kind == "natural"][:6]
     p = insts[0].problem
-    C = np.stack([i.problem.c[0] for i in insts], axis=1)
+    c = np.stack([i.problem.c[0] for i in insts])
     const = np.array([i.problem.const[0] for i in insts])
     prior = np.stack([i.problem.prior[0] for i in insts])
-    sol = WeightSolver(p.k, len(insts), p.pairs).solve(p.G, C, const, prior, p.lam)
+    sol = WeightSolver(p.k, len(insts), p.pairs).solve_problem(WeightProblem(p.G, c, const, p.pairs, prior, p.lam))
     for j, inst in enumerate(insts):
         assert inst.objective(sol.weights[j]) == pytest.approx(inst.certify().objective, rel=1e-10)
     assert sol.certificate_gap <= 1e-9 * (1 + abs(sol.objective))
@@ -129,37 +143,37 @@ def test_polished_weight_step_is_the_certified_optimum(default_suite):
 
 def test_negative_definite_gram_is_rejected():
     with pytest.raises(InputError, match="expected positive semidefinite, found smallest eigenvalue -1"):
-        certified_weights(-np.eye(3), np.zeros(3), 0.0, [(0, 1)])
+        _certified(-np.eye(3), np.zeros(3), 0.0, [(0, 1)])
 
 
 def test_nan_data_is_rejected():
     with pytest.raises(InputError, match="expected finite Gram matrices and prior weights, found NaN/inf in c"):
-        certified_weights(np.eye(3), [0.0, np.nan, 0.0], 0.0, [(0, 1)])
+        _certified(np.eye(3), [0.0, np.nan, 0.0], 0.0, [(0, 1)])
     with pytest.raises(InputError, match="expected finite Gram matrices and prior weights, found NaN/inf in G"):
-        certified_weights(np.full((2, 2), np.nan), np.zeros(2), 0.0, [])
+        _certified(np.full((2, 2), np.nan), np.zeros(2), 0.0, [])
 
 
 def test_pair_naming_one_shape_twice_is_rejected():
     with pytest.raises(InputError, match=r"a pair names one shape twice: \[\[1, 1\]\]"):
-        certified_weights(np.eye(3), np.zeros(3), 0.0, [(0, 2), (1, 1)])
+        _certified(np.eye(3), np.zeros(3), 0.0, [(0, 2), (1, 1)])
 
 
 def test_other_malformed_instances():
     with pytest.raises(InputError, match=r"expected a square \(k, k\) matrix, found shape \(2, 3\)"):
-        certified_weights(np.ones((2, 3)), np.zeros(2), 0.0, [])
+        _certified(np.ones((2, 3)), np.zeros(2), 0.0, [])
     with pytest.raises(InputError, match="expected a symmetric matrix"):
-        certified_weights(np.array([[1.0, 0.5], [0.0, 1.0]]), np.zeros(2), 0.0, [])
+        _certified(np.array([[1.0, 0.5], [0.0, 1.0]]), np.zeros(2), 0.0, [])
     with pytest.raises(InputError, match=r"expected shape indices in \[0, 2\), found \[\[0, 5\]\]"):
-        certified_weights(np.eye(2), np.zeros(2), 0.0, [(0, 5)])
+        _certified(np.eye(2), np.zeros(2), 0.0, [(0, 5)])
     with pytest.raises(InputError, match=r"linear terms c: expected shape \(m, 2\) \(or \(2,\) for one example\), "
                                          r"found \(3,\)"):
-        certified_weights(np.eye(2), np.zeros(3), 0.0, [])
+        _certified(np.eye(2), np.zeros(3), 0.0, [])
     with pytest.raises(InputError, match=r"prior: expected shape \(1, 2\) or None, found \(1, 3\)"):
-        certified_weights(np.eye(2), np.zeros(2), 0.0, [], prior=np.zeros(3))
+        _certified(np.eye(2), np.zeros(2), 0.0, [], prior=np.zeros(3))
     with pytest.raises(InputError, match="lambda: expected >= 0, found -1"):
-        certified_weights(np.eye(2), np.zeros(2), 0.0, [], lam=-1.0)
+        _certified(np.eye(2), np.zeros(2), 0.0, [], lam=-1.0)
     with pytest.raises(InputError, match="lambda: expected a finite number, found inf"):
-        certified_weights(np.eye(2), np.zeros(2), 0.0, [], lam=np.inf)
+        _certified(np.eye(2), np.zeros(2), 0.0, [], lam=np.inf)
     with pytest.raises(InputError, match="formulation: expected one of"):
         FormulationSolver(2, [(0, 1)], "magic")
 
@@ -170,11 +184,12 @@ def test_tree_size_limit_raises_instead_of_answering_uncertified():
     pairs = [(2 * i, 2 * i + 1) for i in range(8)]
     G, c, const, _, _ = _random_instance(rng, k, pairs, 0.0)
     with pytest.raises(SolverError, match="exceeded 1 nodes"):
-        certified_weights(G, c, const, pairs, np.full(k, 0.9), 100.0, max_nodes=1)
+        _certified(G, c, const, pairs, np.full(k, 0.9), 100.0, max_nodes=1)
 
 
 def test_one_definition_of_the_residuals_serves_single_examples_and_batches():
-    from facebasis.rigging.certify import WeightInstance, bound_violation, complementarity_violation
+    from facebasis.rigging.certify import WeightInstance
+    from facebasis.rigging.weightproblem import bound_violation, complementarity_violation
 
     P = np.array([[0, 1], [2, 3]])
     X = np.array([[0.5, 0.2, 0.0, 1.0], [0.0, 0.9, 1.2, 0.3]])

@@ -6,9 +6,11 @@ from conftest import requires_ict
 
 from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 from facebasis.errors import InputError, RigError
-from facebasis.rigging.generation import (GenerationOptions, GenerationProblem, basis_energies, basis_step,
-                                  generate_blendshapes, regularisation_weights)
-from facebasis.rigging.weights import WeightSolver, eq5_objective
+from facebasis.rigging.problem import GenerationOptions, GenerationProblem
+from facebasis.rigging.basis import basis_energies, basis_step, regularisation_weights
+from facebasis.rigging.generation import generate_blendshapes
+from facebasis.rigging.weightproblem import WeightProblem
+from facebasis.rigging.weights import WeightSolver
 
 
 def brute_basis(X, R, At, w, alpha):
@@ -86,7 +88,7 @@ def test_weight_step_recovers_true_weights_with_constraints():
     B = rig.deltas.reshape(rig.n_shapes, -1)
     T = X @ B
     solver = WeightSolver(rig.n_shapes, 6, pairs)
-    sol = solver.solve(B @ B.T, B @ T.T, (T ** 2).sum(1), np.zeros_like(X), lam=0.0)
+    sol = solver.solve_problem(WeightProblem(B @ B.T, (B @ T.T).T, (T ** 2).sum(1), pairs, np.zeros_like(X), 0.0))
     assert np.abs(sol.weights - X).max() <= 1e-6
     assert sol.max_complementarity <= 1e-8 and sol.max_bound_violation <= 1e-8
     assert sol.ipopt_success and sol.ipopt_iterations > 0
@@ -106,7 +108,7 @@ def test_weight_step_prior_pulling_both_shapes_of_a_pair_up():
     T = X_true @ B
     solver = WeightSolver(rig.n_shapes, m, pairs)
     for lam in (1.0, 100.0, 1e4):
-        sol = solver.solve(B @ B.T, B @ T.T, (T ** 2).sum(1), prior, lam)
+        sol = solver.solve_problem(WeightProblem(B @ B.T, (B @ T.T).T, (T ** 2).sum(1), pairs, prior, lam))
         assert sol.max_complementarity <= 1e-8, sol.max_complementarity
         assert sol.max_bound_violation <= 1e-8
         P = np.array(pairs)
@@ -124,7 +126,8 @@ def test_eq5_objective_matches_vertex_residuals():
     prior = rng.uniform(0, 1, X.shape)
     T = rng.standard_normal((3, B.shape[1]))
     direct = np.sum((X @ B - T) ** 2) + 7.0 * np.sum((X - prior) ** 2)
-    assert eq5_objective(X, B @ B.T, B @ T.T, (T ** 2).sum(1), prior, 7.0) == pytest.approx(direct, rel=1e-10)
+    assert WeightProblem(B @ B.T, (B @ T.T).T, (T ** 2).sum(1), (), prior, 7.0).total_objective(X) == pytest.approx(
+        direct, rel=1e-10)
 
 
 def test_initial_weight_noise_changes_little():
@@ -214,9 +217,9 @@ def test_weight_solver_input_errors():
         WeightSolver(3, 1, [(0, 5)])
     s = WeightSolver(3, 1, [])
     with pytest.raises(InputError, match="expected finite Gram matrices"):
-        s.solve(np.full((3, 3), np.nan), np.zeros((3, 1)), np.zeros(1), np.zeros((1, 3)), 1.0)
+        s.solve_problem(WeightProblem(np.full((3, 3), np.nan), np.zeros((1, 3)), np.zeros(1), [], np.zeros((1, 3)), 1.0))
     with pytest.raises(InputError, match=r"lambda: expected >= 0, found -1"):
-        s.solve(np.eye(3), np.zeros((3, 1)), np.zeros(1), np.zeros((1, 3)), -1.0)
+        s.solve_problem(WeightProblem(np.eye(3), np.zeros((1, 3)), np.zeros(1), [], np.zeros((1, 3)), -1.0))
 
 
 def test_ipopt_failure_is_reported_with_its_status():
@@ -228,10 +231,10 @@ def test_ipopt_failure_is_reported_with_its_status():
     C = rng.standard_normal((5, 2))
     s = WeightSolver(5, 2, [(0, 1)], ipopt_options={"max_iter": 1}, polish=False)
     with pytest.raises(SolverError, match="IPOPT failed with status Maximum_Iterations_Exceeded after 1 iterations") as ei:
-        s.solve(G, C, np.zeros(2), np.full((2, 5), 0.5), 1.0)
+        s.solve_problem(WeightProblem(G, C.T, np.zeros(2), [(0, 1)], np.full((2, 5), 0.5), 1.0))
     assert ei.value.status == "Maximum_Iterations_Exceeded"
     s = WeightSolver(5, 2, [(0, 1)], ipopt_options={"max_iter": 1}, polish=True)
-    sol = s.solve(G, C, np.zeros(2), np.full((2, 5), 0.5), 1.0)
+    sol = s.solve_problem(WeightProblem(G, C.T, np.zeros(2), [(0, 1)], np.full((2, 5), 0.5), 1.0))
     assert not sol.ipopt_success and sol.ipopt_status == "Maximum_Iterations_Exceeded"
     assert sol.max_complementarity == 0.0 and sol.max_bound_violation == 0.0
 
@@ -243,7 +246,7 @@ def test_ict_generation_beats_transfer_on_heldout():
     rig reproduces unseen expressions far better than plain deformation transfer (measured: ratio
     0.32, seed 0). With 20 the ratio is 0.95 on this held-out set: one example per shape cannot pin
     the person's modulations (see problems/bench.py), so no such claim is tested for 20."""
-    from facebasis.rigging.generation import reproduction_error
+    from facebasis.rigging.heldout import heldout_error
     from facebasis.geometry.transfer import deformation_transfer
     from problems.generation import ict_person_problem
 
@@ -256,7 +259,7 @@ def test_ict_generation_beats_transfer_on_heldout():
     dt = deformation_transfer(p.template, p.target_neutral)
     errs = {}
     for name, rig in (("generated", res.rig), ("transfer", dt)):
-        errs[name] = reproduction_error(rig, pp.heldout, p.pair_indices)
+        errs[name] = heldout_error(rig, pp.heldout, p.pair_indices)
     print(errs)
     assert errs["generated"] < 0.5 * errs["transfer"]
 
@@ -300,3 +303,31 @@ def test_casadi_model_built_on_a_side_thread_only_when_ipopt_runs_and_answers_un
     assert before._weight_solver is solver
     np.testing.assert_array_equal(res.weights, ref.weights)
     np.testing.assert_array_equal(res.rig.deltas, ref.rig.deltas)
+
+
+def test_generators_share_the_precompute_and_runs_do_not_change_them():
+    """``subset`` and ``with_options`` make new generators on the same precomputed parts; ``run``
+    leaves its generator as it was (``alpha="auto"`` resolved only in ``result.options``), and the
+    result's residuals are those of its rig and weights (``GenerationResult.from_weights``)."""
+    from facebasis.rigging.generation import BlendshapeGenerator
+    from facebasis.rigging.problem import GenerationResult, relative_residuals
+    from facebasis.rigging.synthetic import default_face_problem
+
+    pp = default_face_problem(seed=0, n_train=6)
+    opts = GenerationOptions(iterations=2, ipopt="never", alpha="auto", cv_folds=2, cv_grid=(0.03, 0.3))
+    gen = BlendshapeGenerator(pp.problem, opts)
+    sub = gen.subset([0, 2, 4])
+    assert sub.template_part is gen.template_part and sub.problem.example_names == ("ex00", "ex02", "ex04")
+    np.testing.assert_array_equal(sub.R, gen.R[:, :, [0, 2, 4]])
+    other = gen.with_options(GenerationOptions(iterations=1, ipopt="never"))
+    assert other.template_part is gen.template_part and other.example_part is gen.example_part
+    assert gen.options is opts and other.options.iterations == 1
+    res = gen.run()
+    assert gen.options is opts and gen.options.alpha == "auto" and res.options.alpha == res.crossval.schedule
+    np.testing.assert_array_equal(res.residuals, relative_residuals(res.rig, pp.problem.examples, res.weights))
+    again = GenerationResult.from_weights(res.rig, res.weights, pp.problem, res.options, history=res.history)
+    np.testing.assert_array_equal(again.residuals, res.residuals)
+    assert again.missing == res.missing and again.example_names == pp.problem.example_names
+    moved = res.with_weights(res.rig, np.zeros_like(res.weights), pp.problem)
+    assert moved.history == res.history and moved.crossval is res.crossval
+    assert np.all(moved.residuals == 1.0)  # the neutral reproduces nothing of any expression

@@ -10,9 +10,10 @@ from conftest import write_rig_inputs
 from facebasis.cli import main
 from facebasis.errors import InputError
 from facebasis.geometry.transfer import deformation_transfer
-from facebasis.rigging.crossval import cross_validate_alpha, heldout_error
-from facebasis.rigging.generation import (BlendshapeGenerator, GenerationOptions, GenerationProblem,
-                                          generate_blendshapes, reproduction_error)
+from facebasis.rigging.crossval import cross_validate_alpha
+from facebasis.rigging.heldout import heldout_error
+from facebasis.rigging.generation import BlendshapeGenerator, generate_blendshapes
+from facebasis.rigging.problem import GenerationOptions, GenerationProblem
 from facebasis.rigging.synthetic import default_face_problem, make_person_problem
 from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 
@@ -42,11 +43,14 @@ def test_auto_alpha_picks_transfer_when_transfer_is_the_truth():
     assert len(cv.fold_errors) == 3 and len(cv.folds) == 9
 
 
-def test_auto_alpha_picks_the_small_alpha_when_the_person_differs_from_transfer():
+@pytest.mark.parametrize("candidates", ["path", "coarse"])
+def test_auto_alpha_picks_the_small_alpha_when_the_person_differs_from_transfer(candidates):
     pp = default_face_problem(seed=0, n_train=9)
-    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID, cv_candidates="path")
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=GRID, cv_candidates=candidates)
     cv = cross_validate_alpha(BlendshapeGenerator(pp.problem, opts))
     assert cv.best_alpha == 0.001 and cv.errors[0] < cv.errors[1]
+    if candidates == "coarse":  # the path's candidates are scored by fold deletion (tested below)
+        return
     # the curve is what it claims: the held-out error of the chosen schedule's rig on fold 0
     gen = BlendshapeGenerator(pp.problem, dataclasses.replace(opts, alpha=(1000.0 * 5, 1000.0), ipopt="never"))
     train, held = np.flatnonzero(np.array(cv.folds) != 0), np.flatnonzero(np.array(cv.folds) == 0)
@@ -55,11 +59,22 @@ def test_auto_alpha_picks_the_small_alpha_when_the_person_differs_from_transfer(
         cv.fold_errors[0][1], rel=1e-9)
 
 
-def test_heldout_error_equals_reproduction_error():
+def test_heldout_error_equals_an_ipopt_refit_of_the_vertex_residual():
+    """The one held-out error (certified refit, no IPOPT model) equals the error of weights refitted
+    by the IPOPT model of eq. 5 (polished) and the vertex residual written out; its pooled parts give it too."""
+    from facebasis.rigging.heldout import heldout_error_parts
+    from facebasis.rigging.weightproblem import WeightProblem
+    from facebasis.rigging.weights import WeightSolver
+
     pp = default_face_problem(seed=1, n_train=6)
     rig = deformation_transfer(pp.problem.template, pp.problem.target_neutral)
-    assert heldout_error(rig, pp.heldout, pp.problem.pair_indices) == pytest.approx(
-        reproduction_error(rig, pp.heldout, pp.problem.pair_indices), rel=1e-7)
+    pairs = pp.problem.pair_indices
+    problem = WeightProblem.from_rig(rig, pp.heldout, pairs)
+    W = WeightSolver(rig.n_shapes, problem.m, problem.pairs).solve_problem(problem).X  # IPOPT, polished
+    explicit = np.linalg.norm(rig.evaluate(W) - pp.heldout) / np.linalg.norm(pp.heldout - rig.neutral)
+    assert heldout_error(rig, pp.heldout, pairs) == pytest.approx(explicit, rel=1e-7)
+    num, den = heldout_error_parts(rig, pp.heldout, pairs)
+    assert np.sqrt(num / den) == pytest.approx(heldout_error(rig, pp.heldout, pairs), rel=1e-12)
 
 
 def test_unobserved_shape_keeps_its_transfer_and_zero_weights():
@@ -113,8 +128,9 @@ def test_option_errors(kw, message):
 def test_auto_alpha_needs_as_many_examples_as_folds():
     pp = default_face_problem(seed=0, n_train=3)
     gen = BlendshapeGenerator(pp.problem, GenerationOptions(alpha="auto"))
-    with pytest.raises(InputError, match=r"--alpha auto: expected at least 4 training expressions for 4-fold "
-                                         r"cross-validation, found 3"):
+    # the library names its own parameters (the command line writes them as its flags)
+    with pytest.raises(InputError, match=r"^alpha auto: expected at least 4 training expressions for 4-fold "
+                                         r"cross-validation \(cv_folds\), found 3$"):
         gen.run()
     with pytest.raises(InputError, match=r"alpha: 'auto' has no schedule before cross-validation"):
         GenerationOptions(alpha="auto").schedule()
@@ -143,7 +159,7 @@ def test_rig_cli_without_inputs_names_them(tmp_path, capsys):
 
 
 def test_final_schedule_follows_the_scored_candidate():
-    from facebasis.rigging.crossval import CrossValidation
+    from facebasis.rigging.cvcurve import CrossValidation
 
     opts = GenerationOptions(iterations=3, lam=(100.0, 10.0))
     kw = dict(grid=(0.01, 0.1, 1.0, 10.0), errors=(0.3, 0.1, 0.2, 0.4), fold_errors=((0.3, 0.1, 0.2, 0.4),),
@@ -198,7 +214,8 @@ def test_cold_candidates_do_not_depend_on_the_others():
     assert both.best_alpha == (0.01, 0.1, 10.0)[int(np.argmin(both.curves[chosen]))]
     assert (full.rigs_generated, path.rigs_generated, both.rigs_generated) == (2 * 3, 2 * 3, 2 * 5)
     assert "both procedures tried" in both.to_json()["method"] and "warm-started path" in path.to_json()["method"]
-    with pytest.raises(InputError, match=r"cv_candidates: expected one of deletion, path, cold, both, found 'warm'"):
+    with pytest.raises(InputError, match=r"cv_candidates: expected one of coarse, deletion, path, cold, both, "
+                                         r"found 'warm'"):
         GenerationOptions(cv_candidates="warm")
 
 
@@ -248,7 +265,7 @@ def test_fold_deletion_closed_form_equals_explicit_refits():
 
 
 def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
-    """"deletion" (the default): one path on all training expressions; a candidate's fold error is
+    """"deletion": one path on all training expressions; a candidate's fold error is
     the held-out error of its last basis step solved without the fold, at the path's weights; the
     returned rig is the path's at the chosen alpha (as a full run of final_schedule gives it)."""
     from facebasis.geometry.rig import Rig
@@ -257,7 +274,8 @@ def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
     pp = default_face_problem(seed=0, n_train=8)
     p = pp.problem
     grid = (0.01, 0.1, 10.0)
-    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never")
+    opts = GenerationOptions(iterations=2, alpha="auto", cv_folds=2, cv_grid=grid, ipopt="never",
+                             cv_candidates="deletion")
     shown = []
     res = generate_blendshapes(p, opts, progress=lambda rec, total: shown.append((rec.iteration, total)))
     cv = res.crossval
@@ -288,13 +306,67 @@ def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
 def test_deletion_stops_the_path_once_candidates_score_worse():
     """Transfer is the truth: the largest alpha wins and the path stops after PATIENCE coarse candidates
     above it (the smallest alphas are never run); the neighbour of the coarse minimum is refined."""
-    from facebasis.rigging.crossval import PATIENCE
+    from facebasis.rigging.cvcurve import PATIENCE
 
     problem, _ = _transfer_is_truth_problem(0.05)
     grid = (0.0001, 0.0003, 0.001, 0.003, 0.01, 0.03, 0.1, 1000.0)
-    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=grid, unobserved="fit", ipopt="never")
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=3, cv_grid=grid, unobserved="fit", ipopt="never",
+                             cv_candidates="deletion")
     cv = cross_validate_alpha(BlendshapeGenerator(problem, opts))
     assert PATIENCE == 2 and cv.best_alpha == 1000.0
     # coarse: 1000, 0.03, 0.003 (two above the best: stop); refined: 0.1, the top's neighbour
     assert cv.path == (0.003, 0.01, 0.03, 0.1, 1000.0) and cv.grid == (0.003, 0.03, 0.1, 1000.0)
     assert min(cv.errors) == cv.errors[-1] and cv.rigs_generated == 3 * 4
+
+
+def test_coarse_path_scores_fold_deletion_and_returns_the_path_rig():
+    """"coarse" (the default): the path through every candidate, every other one scored; the best
+    of those and its two neighbours are scored on every fold, the others on the first
+    half; every fold error is the held-out error of the candidate's last basis step solved without
+    the fold at the path's weights (recomputed explicitly here), and the rig returned is the path's
+    at the chosen alpha (a full run of final_schedule gives it, weights and history included)."""
+    from facebasis.geometry.rig import Rig
+    from facebasis.rigging.basis import basis_rows
+
+    pp = default_face_problem(seed=0, n_train=8)
+    p = pp.problem
+    grid = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 10.0)
+    opts = GenerationOptions(iterations=3, alpha="auto", cv_folds=4, cv_grid=grid, ipopt="never")
+    res = generate_blendshapes(p, opts)
+    cv = res.crossval
+    assert cv.candidates == "coarse" and cv.coarse_folds == 2 and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
+    sched = cv.final_schedule(opts)
+    assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))
+    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
+    gen = BlendshapeGenerator(p, dataclasses.replace(opts, alpha=(1.0, 1.0)))
+    ref = gen.run(schedule=sched)
+    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
+    assert np.array_equal(ref.weights, res.weights)
+    # the path went through every other candidate from the top; the route ends at the choice
+    assert set(cv.path) <= set(grid) and cv.path[-1] == 10.0 and cv.path[0] == cv.best_alpha
+    full = [c for c in range(len(cv.grid)) if all(f[c] == f[c] for f in cv.fold_errors)]
+    assert len(full) in (2, 3) and cv.grid.index(cv.best_alpha) in full
+    # the choice: the finalist with the lower error pooled over every fold
+    den = [np.sum((p.examples[np.array(cv.folds) == f] - p.target_neutral) ** 2) for f in range(4)]
+    pooled = {cv.grid[c]: np.sqrt(sum(cv.fold_errors[f][c] ** 2 * den[f] for f in range(4)) / sum(den)) for c in full}
+    assert cv.best_alpha == min(pooled, key=pooled.get) and cv.best_error == pytest.approx(pooled[cv.best_alpha], rel=1e-12)
+    half = {cv.grid[c]: np.sqrt(sum(cv.fold_errors[f][c] ** 2 * den[f] for f in range(2)) / sum(den[:2]))
+            for c in range(len(cv.grid))}
+    assert np.allclose(cv.errors, [half[a] for a in cv.grid], rtol=1e-12, atol=0)  # the curve: the first 2 folds
+    for c, a in enumerate(cv.grid):
+        route = [x for x in cv.path if x >= a] if a in cv.path else None
+        if route is None:  # a candidate the route to the choice did not take: its own route
+            continue
+        s = dataclasses.replace(cv, best_alpha=a, path=tuple(route)).final_schedule(opts)
+        X_in = gen.run(schedule=s[:-1]).weights if len(s) > 1 else p.initial_weights
+        for f in range(4):
+            if cv.fold_errors[f][c] != cv.fold_errors[f][c]:
+                assert c not in full and f >= cv.coarse_folds
+                continue
+            train, held = np.flatnonzero(np.array(cv.folds) != f), np.flatnonzero(np.array(cv.folds) == f)
+            rows, _, _ = basis_rows(X_in[train].T, np.ascontiguousarray(gen.R[:, :, train]), gen.A_tilde, gen.w, a)
+            rig = Rig(p.target_neutral, p.template.faces, p.template.names, gen.deltas_of(gen.reconstruct(rows)))
+            assert heldout_error(rig, p.examples[held], p.pair_indices) == pytest.approx(cv.fold_errors[f][c], rel=1e-9)
+    js = cv.to_json()
+    assert "every other candidate" in js["method"] and js["path"] == list(cv.path)
+    assert all(e is None or e > 0 for row in js["fold_errors"] for e in row)

@@ -4,9 +4,13 @@ certified weight step without IPOPT, IPOPT's role)."""
 import numpy as np
 import pytest
 
-from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions, basis_energies, basis_step, use_direct
+from facebasis.rigging.generation import BlendshapeGenerator
+from facebasis.rigging.problem import GenerationOptions
+from facebasis.rigging.basis import basis_energies, basis_step, use_direct
 from facebasis.rigging.synthetic import default_face_problem
-from facebasis.rigging.weights import WeightSolver, certified_examples, solve_certified
+from facebasis.rigging.certify import certify_problem
+from facebasis.rigging.weightproblem import WeightProblem
+from facebasis.rigging.weights import WeightSolver
 
 
 @pytest.mark.parametrize("k,m", [(9, 5), (9, 6), (9, 20)])
@@ -30,15 +34,16 @@ def test_certified_weight_step_equals_ipopt_then_polish():
     T = rng.standard_normal((40, m))
     prior = rng.uniform(0, 1, (m, k))
     pairs = [(0, 1), (2, 3)]
-    a = solve_certified(B.T @ B, B.T @ T, (T * T).sum(0), prior, 2.0, pairs)
-    b = WeightSolver(k, m, pairs).solve(B.T @ B, B.T @ T, (T * T).sum(0), prior, 2.0)
+    problem = WeightProblem(B.T @ B, (B.T @ T).T, (T * T).sum(0), pairs, prior, 2.0)
+    a = certify_problem(problem)
+    b = WeightSolver(k, m, pairs).solve_problem(problem)
     assert np.allclose(a.weights, b.weights, atol=1e-9) and a.objective == pytest.approx(b.objective, rel=1e-12)
     assert a.ipopt_status == "not run" and a.ipopt_iterations == 0 and np.isnan(a.ipopt_objective)
     # held weights: exactly 0, the pairs of the others remapped
     free = np.array([True, False, True, True, True, True, False, True])
-    X, *_ = certified_examples(B.T @ B, B.T @ T, (T * T).sum(0), prior, 2.0, pairs, free=free)
+    X = certify_problem(problem, free=free).X
     assert (X[:, ~free] == 0).all() and (X[:, 2] * X[:, 3] == 0).all()
-    c = WeightSolver(k, m, pairs).solve(B.T @ B, B.T @ T, (T * T).sum(0), prior, 2.0, free=free)
+    c = WeightSolver(k, m, pairs).solve_problem(problem, free=free)
     assert np.allclose(c.weights, X, atol=1e-9)
 
 

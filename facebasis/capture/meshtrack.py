@@ -138,6 +138,19 @@ class MeshRefiner:
     def _samples(self, V):
         return np.einsum("kj,mjc->mkc", self.bary, V[self.F])  # (M, K, 2), eq. 1 affine map
 
+    def _unknowns(self, prev, nxt, Xp, V_init) -> np.ndarray:
+        """Vertices solved for, ``(U,)``: not held, with an RMS image gradient around them (both frames)
+        of at least ``texture_threshold``."""
+        _, gx, gy = nxt
+        F = self.F
+        Xi = self._samples(V_init)
+        g2 = 0.5 * (sample(gx, Xi) ** 2 + sample(gy, Xi) ** 2 + _grad2(prev, Xp))  # mean |grad I|^2 of both frames
+        tri_g2 = g2.mean(1)
+        vsum = np.bincount(F.ravel(), np.repeat(tri_g2, 3), minlength=self.N)
+        vcnt = np.bincount(F.ravel(), minlength=self.N)
+        textured = np.sqrt(vsum / np.maximum(vcnt, 1)) >= self.opt.texture_threshold
+        return np.flatnonzero(~self.held & textured)
+
     def refine(self, prev, nxt, V_prev: np.ndarray, V_init: np.ndarray) -> np.ndarray:
         """Refine ``V_init`` (positions in the new frame).
 
@@ -166,15 +179,7 @@ class MeshRefiner:
         Xp = self._samples(V_prev)
         s_prev = sample(Ip, Xp)  # (M, K): I_n at the samples of T_n
         area = np.abs(_areas(V_prev, F)) / self.mean_area  # eq. 2: sum = area x mean
-        # texture test: RMS gradient around each vertex in both frames
-        Xi = self._samples(V_init)
-        g2 = 0.5 * (sample(gx, Xi) ** 2 + sample(gy, Xi) ** 2 + _grad2(prev, Xp))  # mean |grad I|^2 of both frames
-        tri_g2 = g2.mean(1)
-        vsum = np.bincount(F.ravel(), np.repeat(tri_g2, 3), minlength=self.N)
-        vcnt = np.bincount(F.ravel(), minlength=self.N)
-        textured = np.sqrt(vsum / np.maximum(vcnt, 1)) >= o.texture_threshold
-        unknown = ~self.held & textured
-        U = np.flatnonzero(unknown)
+        U = self._unknowns(prev, nxt, Xp, V_init)
         if len(U) == 0:
             return V_init.copy()
         col = np.full(self.N, -1)
@@ -183,11 +188,7 @@ class MeshRefiner:
         K2 = sp.kron(Kuu, sp.eye(2), format="csr")  # (2U, 2U), unknowns ordered (u, coordinate)
         lam = o.smooth_weight
         G = self.agg.shape[1]
-        rows = np.repeat(np.arange(M * G).reshape(M, G, 1, 1), 3, 2).repeat(2, 3)  # (M, G, 3, 2)
-        cidx = col[F][:, None, :, None] * 2 + np.arange(2)[None, None, None, :]
-        cidx = np.broadcast_to(cidx, (M, G, 3, 2))
-        keep = (col[F][:, None, :, None] >= 0) & np.ones((M, G, 3, 2), bool)
-        r_rows, r_cols = rows[keep], cidx[keep]
+        keep, r_rows, r_cols = _jacobian_pattern(col[F], G)
 
         def residual(V):
             X = self._samples(V)
@@ -249,3 +250,15 @@ def _areas(V, F):
 def _grad2(prep, X):
     _, gx, gy = prep
     return sample(gx, X) ** 2 + sample(gy, X) ** 2
+
+
+def _jacobian_pattern(colF: np.ndarray, G: int):
+    """Sparsity of the data Jacobian: ``colF (M, 3)`` unknown number of each triangle corner (-1: not
+    an unknown), ``G`` residuals per triangle. Returns the mask ``(M, G, 3, 2)`` of entries that exist
+    and their row and column indices (residual ``(T, g)``; unknown coordinate ``2 u + c``)."""
+    M = len(colF)
+    rows = np.repeat(np.arange(M * G).reshape(M, G, 1, 1), 3, 2).repeat(2, 3)  # (M, G, 3, 2)
+    cidx = colF[:, None, :, None] * 2 + np.arange(2)[None, None, None, :]
+    cidx = np.broadcast_to(cidx, (M, G, 3, 2))
+    keep = (colF[:, None, :, None] >= 0) & np.ones((M, G, 3, 2), bool)
+    return keep, rows[keep], cidx[keep]

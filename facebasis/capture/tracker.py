@@ -8,7 +8,6 @@ the video length except for the tracked coordinates themselves), and writes the 
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -20,13 +19,8 @@ from facebasis.errors import InputError
 
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
-from .landmarks import (
-    face_scale,
-    lip_partners,
-    lk_windows,
-    read_landmarks,
-    validate_landmarks,
-)
+from .inputs import CaptureResult, check_capture_args
+from .landmarks import face_scale, lip_partners, lk_windows, validate_landmarks
 from .lips import (
     INNER_LIPS,
     LIP_RENEW,
@@ -39,7 +33,9 @@ from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_alig
 from .meshtrack import MeshOptions, MeshRefiner, prepare_image
 from .particle import CondensationFilter, FilterOptions, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
-from .video import FrameSource, open_frames, to_gray
+from .video import to_gray
+
+__all__ = ["CaptureResult", "FaceTracker", "FrameResult", "TrackerOptions", "capture", "check_capture_args"]
 
 
 #: Drift correction: samples per side of each landmark's template grid (over its LK window),
@@ -205,6 +201,19 @@ class FaceTracker:
             self.filter.place(self._inner, out[self._inner])
         return out
 
+    def _correct_drift(self, lk, prep):
+        """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
+        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+        p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
+                                 iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
+                                 affine_damping=DRIFT_DAMPING)
+        # a point lost in the previous frame may be pulled back further, on a stricter match
+        reach = self.opt.drift_max_shift * self.scale * np.where(self._lost_prev, self.opt.drift_recovery, 1.0)
+        zmin = np.where(self._lost_prev, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
+        acc = (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
+        self._drift_ok = acc
+        return replace(lk, points=np.where(acc[:, None], p, lk.points))
+
     def track(self, frame: np.ndarray, detections: np.ndarray | None = None,
               detection_sigma: np.ndarray | None = None) -> FrameResult:
         """Track the next frame.
@@ -234,16 +243,7 @@ class FaceTracker:
         prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         self._drift_ok = np.zeros(self.L, bool)
         if self.opt.drift_correction:
-            A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
-            p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
-                                     iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
-                                     affine_damping=DRIFT_DAMPING)
-            # a point lost in the previous frame may be pulled back further, on a stricter match
-            reach = self.opt.drift_max_shift * self.scale * np.where(self._lost_prev, self.opt.drift_recovery, 1.0)
-            zmin = np.where(self._lost_prev, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
-            acc = (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
-            self._drift_ok = acc
-            lk = replace(lk, points=np.where(acc[:, None], p, lk.points))
+            lk = self._correct_drift(lk, prep)
         if self.filter is not None:
             ok = lk.ok | self._drift_ok
             ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
@@ -270,66 +270,6 @@ class FaceTracker:
 
 def _u8(gray: np.ndarray) -> np.ndarray:
     return np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
-
-
-@dataclass(frozen=True)
-class CaptureResult:
-    """Result of :func:`capture`.
-
-    Attributes
-    ----------
-    capture : Capture
-        The tracked sequence (landmarks (T, L, 2), vertices (T, N, 2), faces, fps, size, lost).
-    out : Path or None
-        Output folder, if one was written.
-    seconds : dict
-        Wall time by stage: ``decode``, ``landmarks``, ``mesh``, ``detect``, ``output``.
-    """
-
-    capture: Capture
-    out: Path | None
-    seconds: dict
-
-    @property
-    def landmarks(self) -> np.ndarray:
-        return self.capture.landmarks
-
-    @property
-    def vertices(self) -> np.ndarray:
-        return self.capture.vertices
-
-    @property
-    def lost(self) -> np.ndarray:
-        return self.capture.lost
-
-
-def check_capture_args(video, landmarks, detector, out, max_frames, fps):
-    """Validate the arguments of :func:`capture` before any work; returns (source, landmarks, detector)."""
-    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
-                                   or max_frames < 1):
-        raise InputError(f"--max-frames: expected a positive integer, found {max_frames}")
-    if (landmarks is None) == (detector is None):
-        raise InputError("landmarks: expected exactly one of --landmarks FILE or --detector NAME, found "
-                         + ("both" if landmarks is not None else "neither"))
-    if out is not None:
-        o = Path(out)
-        if o.exists() and not o.is_dir():
-            raise InputError(f"output folder {o}: expected a folder or a new path, found a file")
-    src = video if isinstance(video, FrameSource) else open_frames(video, fps)
-    det = None
-    if detector is not None:
-        if isinstance(detector, str):
-            from .detect import get_detector
-
-            det = get_detector(detector)
-        else:
-            det = detector
-        lm = None
-    elif isinstance(landmarks, (str, os.PathLike)):
-        lm = validate_landmarks(read_landmarks(landmarks), f"landmark file {landmarks}", size=src.size)
-    else:
-        lm = validate_landmarks(landmarks, "landmarks", size=src.size)
-    return src, lm, det
 
 
 def capture(video, landmarks=None, detector=None, out=None, max_frames: int | None = None,
@@ -374,53 +314,82 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
     src, lm0, det = check_capture_args(video, landmarks, detector, out, max_frames, fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
     secs = {"decode": 0.0, "landmarks": 0.0, "mesh": 0.0, "detect": 0.0, "output": 0.0}
+    run = _Run(src, lm0, det, max_frames, overlay, options, detections_as_observations, progress, total, secs)
+    if out is None:
+        return CaptureResult(run(None), None, secs)
+    from facebasis.atomic import atomic_directory
 
-    def run(stage: Path | None):
-        frames = src.frames(max_frames)
+    out = Path(out)
+    with atomic_directory(out) as stage:
+        cap = run(stage)
+    cap = replace(cap, folder=out)
+    return CaptureResult(cap, out, secs)
+
+
+@dataclass
+class _Run:
+    """One :func:`capture` run over a checked source, timing each stage into ``secs``."""
+
+    src: object
+    lm0: np.ndarray | None
+    det: object
+    max_frames: int | None
+    overlay: bool
+    options: TrackerOptions
+    observe: bool
+    progress: Callable | None
+    total: int | None
+    secs: dict
+
+    def _timed(self, stage: str, fn, *args, **kw):
         t = time.perf_counter()
-        first = next(frames)
-        secs["decode"] += time.perf_counter() - t
-        nonlocal lm0
-        if lm0 is None:
-            t = time.perf_counter()
-            lm0 = det.detect(first)
-            secs["detect"] += time.perf_counter() - t
-            if lm0 is None:
+        r = fn(*args, **kw)
+        self.secs[stage] += time.perf_counter() - t
+        return r
+
+    def _start(self, first):
+        """First-frame landmarks (detected if not given), the tracker and the detection-noise estimate."""
+        det = self.det
+        if self.lm0 is None:
+            self.lm0 = self._timed("detect", det.detect, first)
+            if self.lm0 is None:
                 raise InputError(f"--detector {getattr(det, 'name', det)}: expected a face on the first frame of "
-                                 f"{src.path}, found none")
-        tracker = FaceTracker(first, lm0, options)
+                                 f"{self.src.path}, found none")
+        tracker = FaceTracker(first, self.lm0, self.options)
         noise = None
-        if det is not None and detections_as_observations:
+        if det is not None and self.observe:
             from .detect import DetectionNoise
 
-            fo = options.filter
+            fo = self.options.filter
             noise = DetectionNoise(tracker.L, prior=fo.detection_sigma * tracker.scale,
                                    floor=fo.measurement_sigma * tracker.scale)
-            noise.update(lm0, np.zeros_like(lm0))
+            noise.update(self.lm0, np.zeros_like(self.lm0))
+        return tracker, noise
+
+    def __call__(self, stage: Path | None) -> Capture:
+        src, det, secs = self.src, self.det, self.secs
+        frames = src.frames(self.max_frames)
+        first = self._timed("decode", next, frames)
+        tracker, noise = self._start(first)
         writer = None
-        if stage is not None and overlay:
+        if stage is not None and self.overlay:
             from .overlay import OverlayWriter, draw_overlay
 
             writer = OverlayWriter(stage / OVERLAY_FILE, src.fps, src.size)
         lms, Vs, losts = [tracker.first.landmarks], [tracker.first.vertices], [tracker.first.lost]
         try:
             if writer is not None:
-                t = time.perf_counter()
-                writer.write(draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, lm0))
-                secs["output"] += time.perf_counter() - t
-            if progress:
-                progress(1, total)
+                self._timed("output", lambda: writer.write(
+                    draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, self.lm0)))
+            if self.progress:
+                self.progress(1, self.total)
             while True:
-                t = time.perf_counter()
-                frame = next(frames, None)
-                secs["decode"] += time.perf_counter() - t
+                frame = self._timed("decode", next, frames, None)
                 if frame is None:
                     break
                 dets = None
-                if det is not None and detections_as_observations:
-                    t = time.perf_counter()
-                    d = det.detect(frame, near=lms[-1])
-                    secs["detect"] += time.perf_counter() - t
+                if det is not None and self.observe:
+                    d = self._timed("detect", det.detect, frame, near=lms[-1])
                     dets = d if d is not None and len(d) == tracker.L else None
                 res = tracker.track(frame, dets, None if noise is None else noise.sigma)
                 if noise is not None:
@@ -429,11 +398,10 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
                 Vs.append(res.vertices)
                 losts.append(res.lost)
                 if writer is not None:
-                    t = time.perf_counter()
-                    writer.write(draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost))
-                    secs["output"] += time.perf_counter() - t
-                if progress:
-                    progress(len(lms), total)
+                    self._timed("output", lambda: writer.write(
+                        draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost)))
+                if self.progress:
+                    self.progress(len(lms), self.total)
         finally:
             if writer is not None:
                 writer.close()
@@ -442,18 +410,5 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
         cap = Capture(np.stack(lms), np.stack(Vs), tracker.mesh.faces.copy(), float(src.fps), src.size,
                       np.stack(losts), None, Path(src.path) if src.kind == "video" else None)
         if stage is not None:
-            t = time.perf_counter()
-            write_capture(stage, cap)
-            secs["output"] += time.perf_counter() - t
+            self._timed("output", write_capture, stage, cap)
         return cap
-
-    if out is None:
-        cap = run(None)
-        return CaptureResult(cap, None, secs)
-    from facebasis.atomic import atomic_directory
-
-    out = Path(out)
-    with atomic_directory(out) as stage:
-        cap = run(stage)
-    cap = replace(cap, folder=out)
-    return CaptureResult(cap, out, secs)

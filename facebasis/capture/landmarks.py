@@ -218,3 +218,32 @@ def format_pts(pts: np.ndarray) -> str:
     pts = np.asarray(pts, float)
     body = "\n".join(f"{x:.3f} {y:.3f}" for x, y in pts)
     return f"version: 1\nn_points: {len(pts)}\n{{\n{body}\n}}\n"
+
+
+def neighbour_affine_prediction(P0: np.ndarray, Pt: np.ndarray, W: np.ndarray, conf: np.ndarray) -> np.ndarray:
+    """Each point predicted from the others by a weighted least-squares affine map from frame 0.
+
+    For point ``i``, the affine map ``x -> M_i^T [x, 1]`` minimising
+    ``sum_{j != i} W_ij c_j |M_i^T [P0_j, 1] - Pt_j|^2`` (``c`` = ``conf``) is applied to ``P0_i``
+    (leave-one-out: ``W`` has a zero diagonal). A small ridge on the normal matrix keeps a point whose
+    confident neighbours are nearly collinear at a finite prediction.
+
+    Parameters
+    ----------
+    P0, Pt : ndarray, shape (L, 2)
+        Points in frame 0 and frame t.
+    W : ndarray, shape (L, L)
+        Non-negative weights with a zero diagonal (:func:`facebasis.capture.particle.neighbour_weights`).
+    conf : ndarray, shape (L,) bool
+        Points that may serve as neighbours.
+
+    Returns
+    -------
+    ndarray, shape (L, 2)
+    """
+    Wc = W * np.asarray(conf, float)[None, :]
+    X = np.concatenate([P0, np.ones((len(P0), 1))], 1)                # (L, 3)
+    A = np.einsum("ij,jk,jl->ikl", Wc, X, X)                           # (L, 3, 3)
+    B = np.einsum("ij,jk,jl->ikl", Wc, X, Pt)                          # (L, 3, 2)
+    A = A + 1e-6 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(3) + 1e-12 * np.eye(3)
+    return np.einsum("ik,ikl->il", X, np.linalg.solve(A, B))

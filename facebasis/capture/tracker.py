@@ -20,7 +20,14 @@ from facebasis.errors import InputError
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
 from .inputs import CaptureResult, check_capture_args
-from .landmarks import face_scale, lip_partners, lk_windows, validate_landmarks
+from .landmarks import (
+    face_scale,
+    face_width,
+    lip_partners,
+    lk_windows,
+    neighbour_affine_prediction,
+    validate_landmarks,
+)
 from .lips import (
     INNER_LIPS,
     LIP_RENEW,
@@ -31,7 +38,7 @@ from .lips import (
 )
 from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_align
 from .meshtrack import MeshOptions, MeshRefiner, prepare_image
-from .particle import CondensationFilter, FilterOptions, sample
+from .particle import CondensationFilter, FilterOptions, neighbour_weights, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
 from .video import to_gray
 
@@ -93,6 +100,10 @@ class TrackerOptions:
     drift_recovery : float
         For a point lost in the previous frame, ``drift_max_shift`` is multiplied by this and the
         NCC threshold raised halfway to 1, so the first frame's appearance can pull it back.
+    outlier_distance : float
+        A landmark farther than this many (frame-0) face widths from where the affine motion of its
+        neighbours since frame 0 puts it is moved there and reported lost (0: off); see
+        :meth:`FaceTracker._repair_outliers`.
     filter : FilterOptions
     mesh : MeshOptions
     """
@@ -109,6 +120,7 @@ class TrackerOptions:
     drift_max_shift: float = 1.0
     drift_zncc: float = 0.9
     drift_recovery: float = 4.0
+    outlier_distance: float = 0.15
     filter: FilterOptions = field(default_factory=FilterOptions)
     mesh: MeshOptions = field(default_factory=MeshOptions)
 
@@ -175,6 +187,8 @@ class FaceTracker:
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
         self._lost_prev = np.zeros(L, bool)
+        self._lm0, self._width = lm.copy(), face_width(lm)
+        self._W = neighbour_weights(lm, options.filter.neighbour_sigma * face_width(lm))   # LK-failure prediction
         self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
         self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
@@ -201,16 +215,61 @@ class FaceTracker:
             self.filter.place(self._inner, out[self._inner])
         return out
 
+    def _predict_failed(self, lk):
+        """Where LK failed (status, forward-backward check, or a point off the frame), put the point at
+        its previous position moved by its confident neighbours' mean LK motion (Gaussian weights of
+        the first-frame distances, as the filter's motion model), so the drift correction starts from a
+        plausible place instead of LK's diverged guess (cap12 frame 618: the chin jumped 235 px and the
+        track collapsed)."""
+        w, h = self.size
+        pts = lk.points
+        inside = np.all(np.isfinite(pts), axis=1) & np.all((pts >= 0) & (pts <= [w - 1, h - 1]), axis=1)
+        ok = lk.ok & inside
+        if ok.all():
+            return lk
+        disp = np.where(ok[:, None], pts - self._lm, 0.0)
+        Wc = self._W * ok[None, :]
+        wsum = Wc.sum(1, keepdims=True)
+        pred = self._lm + (Wc @ disp) / np.maximum(wsum, 1e-12) * (wsum > 1e-3)
+        return replace(lk, points=np.where(ok[:, None], pts, pred), ok=ok)
+
+    def _repair_outliers(self, lm: np.ndarray, lost: np.ndarray):
+        """Points farther than ``outlier_distance`` face widths from where their neighbours' affine motion
+        since frame 0 puts them (:func:`neighbour_affine_prediction`, leave-one-out, the other points'
+        outliers left out) are moved there and reported lost. True shapes stay within 0.13 face widths
+        of that prediction (per-frame dlib on both shared clips, worst frame); a jaw-contour point that
+        slid along the silhouette and tangled with its neighbours (cap12, 25-50 px) does not."""
+        tau = self.opt.outlier_distance * self._width
+        if not tau > 0:
+            return lm, lost
+        conf = ~lost
+        conf[self._inner] = False
+        pred = neighbour_affine_prediction(self._lm0, lm, self._W, conf)
+        bad = np.linalg.norm(lm - pred, axis=1) > tau
+        if not bad.any():
+            return lm, lost
+        pred = neighbour_affine_prediction(self._lm0, lm, self._W, conf & ~bad)
+        bad &= np.linalg.norm(lm - pred, axis=1) > tau
+        lm = np.where(bad[:, None], pred, lm)
+        if self.filter is not None:
+            self.filter.place(np.flatnonzero(bad), lm[bad])
+        return lm, lost | bad
+
     def _correct_drift(self, lk, prep):
         """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
         A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
         p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
                                  iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
                                  affine_damping=DRIFT_DAMPING)
-        # a point lost in the previous frame may be pulled back further, on a stricter match
-        reach = self.opt.drift_max_shift * self.scale * np.where(self._lost_prev, self.opt.drift_recovery, 1.0)
-        zmin = np.where(self._lost_prev, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
-        acc = (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
+        # a point lost in the previous frame or failed by LK in this one (started from its neighbours'
+        # motion) may be pulled back further, on a stricter match
+        far = self._lost_prev | ~lk.ok
+        reach = self.opt.drift_max_shift * self.scale * np.where(far, self.opt.drift_recovery, 1.0)
+        zmin = np.where(far, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
+        w, h = self.size
+        inside = np.all(np.isfinite(p), axis=1) & np.all((p >= 0) & (p <= [w - 1, h - 1]), axis=1)
+        with np.errstate(invalid="ignore"):
+            acc = inside & (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
         self._drift_ok = acc
         return replace(lk, points=np.where(acc[:, None], p, lk.points))
 
@@ -238,8 +297,8 @@ class FaceTracker:
             raise InputError(f"frame: expected size {self.size[0]} x {self.size[1]}, "
                              f"found {gray.shape[1]} x {gray.shape[0]}")
         pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
-        lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
-                      self.opt.fb_threshold * self.scale)
+        lk = self._predict_failed(lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
+                                           self.opt.fb_threshold * self.scale))
         prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         self._drift_ok = np.zeros(self.L, bool)
         if self.opt.drift_correction:
@@ -254,8 +313,10 @@ class FaceTracker:
         self.lk_motion = lk.points - self._lm   # the tracked (drift-corrected) motion: detection noise estimate
         lost = np.asarray(lost, bool).copy()
         lost[self._inner] = lost[self._partner]
+        lm = self._follow_lips(lm, detections)
+        lm, lost = self._repair_outliers(lm, lost)
         self._lost_prev = lost.copy()
-        lm = np.clip(self._follow_lips(lm, detections), 0, [self.size[0] - 1, self.size[1] - 1])
+        lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])
         t1 = time.perf_counter()
         # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
         V_init = self._V + self.harmonic.solve(lm - self._lm)

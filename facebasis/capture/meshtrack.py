@@ -32,6 +32,12 @@ from scipy.sparse.linalg import splu
 from .particle import sample
 
 
+#: up to this many unknown coordinates the LM normal equations are dense (a face mesh at the default
+#: spacing has about 170: a dense solve takes a fraction of a millisecond, SciPy's sparse LU and
+#: matrix assembly took most of the mesh stage); larger meshes use the sparse LU
+DENSE_MAX = 600
+
+
 @dataclass(frozen=True)
 class MeshOptions:
     """Options of the mesh tracking.
@@ -134,9 +140,11 @@ class MeshRefiner:
         self.K = cotangent_laplacian(V0, F, clip_negative=True).tocsr()  # E_smooth operator, eq. 4
         a0 = np.abs(_areas(V0, self.F))
         self.mean_area = float(a0.mean())
+        # residual g of triangle T from its samples' image gradient: (K, G * 3) factors agg[k, g] b_kj
+        self._AB = np.einsum("kg,kj->kgj", self.agg, self.bary).reshape(len(self.bary), -1)
 
     def _samples(self, V):
-        return np.einsum("kj,mjc->mkc", self.bary, V[self.F])  # (M, K, 2), eq. 1 affine map
+        return self.bary @ V[self.F]  # (M, K, 2), eq. 1 affine map
 
     def _unknowns(self, prev, nxt, Xp, V_init) -> np.ndarray:
         """Vertices solved for, ``(U,)``: not held, with an RMS image gradient around them (both frames)
@@ -184,12 +192,14 @@ class MeshRefiner:
             return V_init.copy()
         col = np.full(self.N, -1)
         col[U] = np.arange(len(U))
-        Kuu = self.K[U][:, U]
-        K2 = sp.kron(Kuu, sp.eye(2), format="csr")  # (2U, 2U), unknowns ordered (u, coordinate)
+        n = 2 * len(U)
+        dense = n <= DENSE_MAX
+        K2 = sp.kron(self.K[U][:, U], sp.eye(2), format="csr")  # (2U, 2U), unknowns ordered (u, coordinate)
+        if dense:
+            K2 = K2.toarray()
         lam = o.smooth_weight
         G = self.agg.shape[1]
-        keep, r_rows, r_cols = _jacobian_pattern(col[F], G)
-
+        dof, pair, pair_ok = _jacobian_pattern(col[F])
         def residual(V):
             X = self._samples(V)
             diff = s_prev - sample(In, X)  # eq. 2: I_n(p) - I_{n+1}(f(p))
@@ -206,24 +216,30 @@ class MeshRefiner:
         step_cap = o.max_step * self.spacing
         sign0 = np.sign(_areas(V_init, F))
         for _ in range(o.iterations):
-            grad = np.stack([sample(gx, X), sample(gy, X)], -1)  # (M, K, 2)
-            # d r_{T,g} / d v_{F[T,j], c} = -area_T * sum_k agg[k,g] b_kj dI/dc (eq. 3 Jacobian)
-            Jv = -area[:, None, None, None] * np.einsum("kg,kj,mkc->mgjc", self.agg, self.bary, grad)
-            J = sp.csr_matrix((Jv[keep], (r_rows, r_cols)), shape=(M * G, 2 * len(U)))
-            JtJ = (J.T @ J).tocsr()
-            g = J.T @ r.ravel() + lam * (K2 @ delta)
-            Hb = JtJ + lam * K2
-            diag = Hb.diagonal() + 1e-9
+            grad = np.stack([sample(gx, X), sample(gy, X)], 1)  # (M, 2, K)
+            # d r_{T,g} / d v_{F[T,j], c} = -area_T * sum_k agg[k,g] b_kj dI/dc (eq. 3 Jacobian), (M, G, 6)
+            Jv = (grad @ self._AB).reshape(M, 2, G, 3).transpose(0, 2, 3, 1).reshape(M, G, 6)
+            Jv *= -area[:, None, None] * (dof >= 0)[:, None, :]
+            # normal equations assembled from per-triangle 6 x 6 blocks (nothing loops over triangles)
+            JtJ = Jv.transpose(0, 2, 1) @ Jv                      # (M, 6, 6)
+            Jtr = (Jv.transpose(0, 2, 1) @ r[..., None])[..., 0]  # (M, 6)
+            g = np.bincount(dof[dof >= 0], Jtr[dof >= 0], minlength=n) + lam * (K2 @ delta)
+            if dense:
+                Hb = np.bincount(pair, JtJ[pair_ok], minlength=n * n).reshape(n, n) + lam * K2
+                diag = np.diagonal(Hb) + 1e-9
+            else:
+                Hb = sp.csr_matrix((JtJ[pair_ok], (pair // n, pair % n)), shape=(n, n)) + lam * K2
+                diag = Hb.diagonal() + 1e-9
             for _try in range(4):
-                A = (Hb + sp.diags(mu * diag)).tocsc()
                 try:
-                    step = -splu(A).solve(g)
-                except RuntimeError:
+                    step = -(np.linalg.solve(Hb + np.diag(mu * diag), g) if dense
+                             else splu((Hb + sp.diags(mu * diag)).tocsc()).solve(g))
+                except (RuntimeError, np.linalg.LinAlgError):
                     mu *= 10
                     continue
                 s2 = step.reshape(-1, 2)
-                n = np.linalg.norm(s2, axis=1, keepdims=True)
-                s2 = s2 * np.minimum(1.0, step_cap / np.maximum(n, 1e-12))
+                length = np.linalg.norm(s2, axis=1, keepdims=True)
+                s2 = s2 * np.minimum(1.0, step_cap / np.maximum(length, 1e-12))
                 d_new = delta + s2.ravel()
                 V_new = V_init.copy()
                 V_new[U] += d_new.reshape(-1, 2)
@@ -252,13 +268,16 @@ def _grad2(prep, X):
     return sample(gx, X) ** 2 + sample(gy, X) ** 2
 
 
-def _jacobian_pattern(colF: np.ndarray, G: int):
-    """Sparsity of the data Jacobian: ``colF (M, 3)`` unknown number of each triangle corner (-1: not
-    an unknown), ``G`` residuals per triangle. Returns the mask ``(M, G, 3, 2)`` of entries that exist
-    and their row and column indices (residual ``(T, g)``; unknown coordinate ``2 u + c``)."""
-    M = len(colF)
-    rows = np.repeat(np.arange(M * G).reshape(M, G, 1, 1), 3, 2).repeat(2, 3)  # (M, G, 3, 2)
-    cidx = colF[:, None, :, None] * 2 + np.arange(2)[None, None, None, :]
-    cidx = np.broadcast_to(cidx, (M, G, 3, 2))
-    keep = (colF[:, None, :, None] >= 0) & np.ones((M, G, 3, 2), bool)
-    return keep, rows[keep], cidx[keep]
+def _jacobian_pattern(colF: np.ndarray):
+    """Unknowns of each triangle's 6 coordinates and the normal matrix entries they fill.
+
+    ``colF (M, 3)``: unknown number of each corner (-1: held). Returns ``dof (M, 6)`` (coordinate
+    ``2 u + c`` of corner ``j`` at ``2 j + c``, -1 where held), and for the pairs of unknown coordinates
+    of a triangle the flat index ``row * n + col`` into the ``(n, n)`` normal matrix and the mask
+    ``(M, 6, 6)`` selecting them (``n`` = twice the number of unknowns).
+    """
+    n = 2 * (int(colF.max()) + 1)
+    dof = np.where(colF[:, :, None] >= 0, colF[:, :, None] * 2 + np.arange(2), -1).reshape(len(colF), 6)
+    ok = (dof[:, :, None] >= 0) & (dof[:, None, :] >= 0)
+    pair = (dof[:, :, None] * n + dof[:, None, :])[ok]
+    return dof, pair, ok

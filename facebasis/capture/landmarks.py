@@ -225,8 +225,9 @@ def neighbour_affine_prediction(P0: np.ndarray, Pt: np.ndarray, W: np.ndarray, c
 
     For point ``i``, the affine map ``x -> M_i^T [x, 1]`` minimising
     ``sum_{j != i} W_ij c_j |M_i^T [P0_j, 1] - Pt_j|^2`` (``c`` = ``conf``) is applied to ``P0_i``
-    (leave-one-out: ``W`` has a zero diagonal). A small ridge on the normal matrix keeps a point whose
-    confident neighbours are nearly collinear at a finite prediction.
+    (leave-one-out: ``W`` has a zero diagonal). Coordinates are centred on ``P0_i``, so the prediction
+    is the map's translation; a ridge of 1e-9 of its trace on the linear part keeps a point whose
+    confident neighbours are collinear at a finite prediction.
 
     Parameters
     ----------
@@ -242,8 +243,11 @@ def neighbour_affine_prediction(P0: np.ndarray, Pt: np.ndarray, W: np.ndarray, c
     ndarray, shape (L, 2)
     """
     Wc = W * np.asarray(conf, float)[None, :]
-    X = np.concatenate([P0, np.ones((len(P0), 1))], 1)                # (L, 3)
-    A = np.einsum("ij,jk,jl->ikl", Wc, X, X)                           # (L, 3, 3)
-    B = np.einsum("ij,jk,jl->ikl", Wc, X, Pt)                          # (L, 3, 2)
-    A = A + 1e-6 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(3) + 1e-12 * np.eye(3)
-    return np.einsum("ik,ikl->il", X, np.linalg.solve(A, B))
+    L = len(P0)
+    X = np.concatenate([P0[None, :, :] - P0[:, None, :], np.ones((L, L, 1))], -1)   # (L, L, 3), centred on i
+    A = np.einsum("ij,ijk,ijl->ikl", Wc, X, X)                          # (L, 3, 3)
+    B = np.einsum("ij,ijk,jl->ikl", Wc, X, Pt)                          # (L, 3, 2)
+    ridge = 1e-9 * (A[:, 0, 0] + A[:, 1, 1]) + 1e-12
+    A[:, [0, 1], [0, 1]] += ridge[:, None]
+    A[:, 2, 2] += 1e-12
+    return np.linalg.solve(A, B)[:, 2, :]                               # the map at P0_i: its translation

@@ -165,6 +165,9 @@ class FaceTracker:
         self.opt = options
         if options.inner_lips not in INNER_LIPS:
             raise InputError(f"inner_lips: expected one of {', '.join(INNER_LIPS)}, found {options.inner_lips!r}")
+        if not (np.isfinite(options.outlier_distance) and options.outlier_distance >= 0):
+            raise InputError(f"outlier_distance: expected a number >= 0 (face widths; 0 = off), "
+                             f"found {options.outlier_distance!r}")
         gray = to_gray(first_frame)
         h, w = gray.shape
         lm = validate_landmarks(landmarks, "landmarks", size=(w, h))

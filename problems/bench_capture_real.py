@@ -6,7 +6,9 @@ MediaPipe's face mesh too, mapped onto the same 68 points. Methods, all started 
 first-frame points:
 
 * ``plain LK``: OpenCV's pyramidal LK frame to frame (21 x 21, 3 levels), the baseline;
-* ``tracking only``: ``facebasis capture --landmarks`` (no per-frame detector);
+* ``tracking only``: ``facebasis capture --landmarks`` (no per-frame detector), and per stage: without
+  the mesh stage, without the filter and the mesh (raw LK), without the drift correction against the
+  first frame, without the outlier repair (``TrackerOptions(outlier_distance=0)``);
 * ``--detector dlib`` / ``--detector mediapipe``: every frame's detection fed to the filter (the
   detections are replayed from the ones measured here, so each detector runs once per frame);
 * ``mediapipe alone``: the mapped MediaPipe points themselves (how far the two detectors are apart).
@@ -95,7 +97,7 @@ def errors(lm: np.ndarray, ref: np.ndarray) -> dict:
 
 
 def run_clip(clip: Path, cache: Path | None, max_frames: int | None, rows: list) -> None:
-    from facebasis.capture import capture, open_frames
+    from facebasis.capture import TrackerOptions, capture, open_frames
 
     ref, ms_dlib = detections(clip, "dlib", cache, max_frames)
     mp, ms_mp = detections(clip, "mediapipe", cache, max_frames)
@@ -106,20 +108,28 @@ def run_clip(clip: Path, cache: Path | None, max_frames: int | None, rows: list)
     print(f"\n{clip.name}: {len(ref)} frames; dlib on {int(np.isfinite(ref).all((1, 2)).sum())} "
           f"({ms_dlib:.0f} ms/frame), mediapipe on {int(np.isfinite(mp).all((1, 2)).sum())} ({ms_mp:.1f} ms/frame; "
           f"0 = cached)")
+    def track(opt):
+        return capture(open_frames(clip), landmarks=lm0, max_frames=max_frames, options=opt).landmarks
+
     methods = {"plain LK": lambda: plain_lk(clip, lm0, max_frames),
                "tracking only": lambda: capture(open_frames(clip), landmarks=lm0, max_frames=max_frames).landmarks,
+               "tracking only, no mesh": lambda: track(TrackerOptions(refine_mesh=False)),
+               "tracking only, raw LK (no filter, no mesh)": lambda: track(TrackerOptions(use_filter=False,
+                                                                                          refine_mesh=False)),
+               "tracking only, no drift correction": lambda: track(TrackerOptions(drift_correction=False)),
+               "tracking only, no outlier repair": lambda: track(TrackerOptions(outlier_distance=0.0)),
                "--detector dlib": lambda: capture(open_frames(clip), detector=_Replay(ref, "dlib"),
                                                   max_frames=max_frames).landmarks,
                "--detector mediapipe": lambda: capture(open_frames(clip), detector=_Replay(mp, "mediapipe"),
                                                        max_frames=max_frames).landmarks,
                "mediapipe alone": lambda: mp}
-    print(f"  {'method':22s} {'mean':>6s} {'last100':>8s} {'jaw':>6s} {'inner':>6s} {'worst':>7s} {'>10px':>6s}  ms/frame")
+    print(f"  {'method':42s} {'mean':>6s} {'last100':>8s} {'jaw':>6s} {'inner':>6s} {'worst':>7s} {'>10px':>6s}  ms/frame")
     for name, fn in methods.items():
         t = time.perf_counter()
         lm = fn()
         ms = (time.perf_counter() - t) / len(ref) * 1e3
         r = errors(lm, ref)
-        print(f"  {name:22s} {r['mean_px']:6.2f} {r['last100_px']:8.2f} {r['jaw_px']:6.2f} {r['inner_px']:6.2f} "
+        print(f"  {name:42s} {r['mean_px']:6.2f} {r['last100_px']:8.2f} {r['jaw_px']:6.2f} {r['inner_px']:6.2f} "
               f"{r['worst_frame_px']:7.2f} {r['frames_over_10px']:6d}  {ms:7.1f}")
         rows.append({"clip": clip.name, "method": name, **{k: (round(float(v), 3) if isinstance(v, float) else v)
                                                           for k, v in r.items()}})

@@ -8,9 +8,11 @@ CONDENSATION particle filter; their displacements drive a harmonic deformation o
 data term plus a smoothness term (eq. 1-5).
 
 Modules: ``video`` (frame sources), ``landmarks`` (files, iBUG-68 regions, LK windows),
-``detect`` (optional dlib detector), ``lips`` (inner lips placed from the outer lip), ``facemesh`` (mesh), ``harmonic`` (eq. 6-9), ``lk``
-(Lucas-Kanade), ``particle`` (CONDENSATION), ``meshtrack`` (eq. 1-5), ``tracker``
-(:class:`FaceTracker`, :func:`capture`), ``trackfile`` (output format, :func:`read_capture`),
+``detect`` (optional dlib and MediaPipe detectors), ``lips`` (inner lips placed from the outer lip),
+``facemesh`` (mesh), ``harmonic`` (eq. 6-9), ``lk`` (Lucas-Kanade, drift correction), ``particle``
+(CONDENSATION), ``meshtrack`` (eq. 1-5), ``options`` (:class:`TrackerOptions`), ``tracker``
+(:class:`FaceTracker`, :func:`capture`), ``inputs`` (what :func:`capture` checks before any work,
+:class:`CaptureResult`), ``trackfile`` (output format, :func:`read_capture`),
 ``overlay`` (overlay video), ``synthetic`` (generated sequences with ground truth).
 """
 

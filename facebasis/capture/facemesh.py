@@ -238,9 +238,3 @@ def build_face_mesh(landmarks: np.ndarray, spacing: float | None = None) -> Face
     used[:L] = True   # duplicates stay as isolated landmark vertices
     remap = np.cumsum(used) - 1  # drop grid points left in no triangle
     return FaceMesh(V[used], remap[F], L, bidx, h, dup.astype(np.int64))
-
-
-def mesh_edges(F: np.ndarray) -> np.ndarray:
-    """Unique undirected edges, ``(E, 2)``."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    return np.unique(E, axis=0)

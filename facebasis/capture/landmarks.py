@@ -218,3 +218,36 @@ def format_pts(pts: np.ndarray) -> str:
     pts = np.asarray(pts, float)
     body = "\n".join(f"{x:.3f} {y:.3f}" for x, y in pts)
     return f"version: 1\nn_points: {len(pts)}\n{{\n{body}\n}}\n"
+
+
+def neighbour_affine_prediction(P0: np.ndarray, Pt: np.ndarray, W: np.ndarray, conf: np.ndarray) -> np.ndarray:
+    """Each point predicted from the others by a weighted least-squares affine map from frame 0.
+
+    For point ``i``, the affine map ``x -> M_i^T [x, 1]`` minimising
+    ``sum_{j != i} W_ij c_j |M_i^T [P0_j, 1] - Pt_j|^2`` (``c`` = ``conf``) is applied to ``P0_i``
+    (leave-one-out: ``W`` has a zero diagonal). Coordinates are centred on ``P0_i``, so the prediction
+    is the map's translation; a ridge of 1e-9 of its trace on the linear part keeps a point whose
+    confident neighbours are collinear at a finite prediction.
+
+    Parameters
+    ----------
+    P0, Pt : ndarray, shape (L, 2)
+        Points in frame 0 and frame t.
+    W : ndarray, shape (L, L)
+        Non-negative weights with a zero diagonal (:func:`facebasis.capture.particle.neighbour_weights`).
+    conf : ndarray, shape (L,) bool
+        Points that may serve as neighbours.
+
+    Returns
+    -------
+    ndarray, shape (L, 2)
+    """
+    Wc = W * np.asarray(conf, float)[None, :]
+    L = len(P0)
+    X = np.concatenate([P0[None, :, :] - P0[:, None, :], np.ones((L, L, 1))], -1)   # (L, L, 3), centred on i
+    A = np.einsum("ij,ijk,ijl->ikl", Wc, X, X)                          # (L, 3, 3)
+    B = np.einsum("ij,ijk,jl->ikl", Wc, X, Pt)                          # (L, 3, 2)
+    ridge = 1e-9 * (A[:, 0, 0] + A[:, 1, 1]) + 1e-12
+    A[:, [0, 1], [0, 1]] += ridge[:, None]
+    A[:, 2, 2] += 1e-12
+    return np.linalg.solve(A, B)[:, 2, :]                               # the map at P0_i: its translation

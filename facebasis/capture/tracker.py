@@ -8,10 +8,9 @@ the video length except for the tracked coordinates themselves), and writes the 
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +19,13 @@ from facebasis.errors import InputError
 
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
+from .inputs import CaptureResult, check_capture_args
 from .landmarks import (
     face_scale,
+    face_width,
     lip_partners,
     lk_windows,
-    read_landmarks,
+    neighbour_affine_prediction,
     validate_landmarks,
 )
 from .lips import (
@@ -36,85 +37,19 @@ from .lips import (
     similarity_factor,
 )
 from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_align
-from .meshtrack import MeshOptions, MeshRefiner, prepare_image
-from .particle import CondensationFilter, FilterOptions, sample
+from .meshtrack import MeshRefiner, prepare_image
+from .options import TrackerOptions
+from .particle import CondensationFilter, neighbour_weights, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
-from .video import FrameSource, open_frames, to_gray
+from .video import to_gray
+
+__all__ = ["CaptureResult", "FaceTracker", "FrameResult", "TrackerOptions", "capture", "check_capture_args"]
 
 
 #: Drift correction: samples per side of each landmark's template grid (over its LK window),
 #: Gauss-Newton iterations per frame, damping of the affine part (measured on the ground-truth
 #: benchmark: 7 x 7 samples and 4 iterations are as precise as 11 x 11 and 8, at a third of the cost).
 DRIFT_SAMPLES, DRIFT_ITERATIONS, DRIFT_DAMPING = 7, 4, 0.05
-
-
-@dataclass(frozen=True)
-class TrackerOptions:
-    """Options of :class:`FaceTracker`.
-
-    Attributes
-    ----------
-    use_filter : bool
-        Stabilise LK with the CONDENSATION filter (False: raw LK, for comparison).
-    refine_mesh : bool
-        Run the Levenberg-Marquardt mesh tracking after the harmonic initialisation.
-    mesh_spacing : float or None
-        Mesh edge length in pixels (default: face width / 12).
-    lk_levels : int
-        Pyramid levels above the base image.
-    fb_threshold : float
-        Forward-backward error limit, pixels at reference face size.
-    windows : dict or None
-        Per-region LK windows ``{region: (width, height)}`` overriding
-        :data:`facebasis.capture.landmarks.DEFAULT_WINDOWS`.
-    inner_lips : str
-        ``"follow"`` (default): the inner-lip points of a 68-point iBUG set (61-63, 65-67) follow
-        their outer-lip partner across the same lip (50-52, 56-58),
-        ``p_inner = p_outer + a o``, with ``o`` the lip-thickness offset of the first frame and
-        ``a`` the complex factor (rotation and scale) of the least-squares similarity of the outer
-        lip (48-59) from the first frame, see :func:`follow_outer_lip`. In detector mode each
-        detection's own offset (inner minus partner, brought back by ``a``) renews ``o``
-        (exponential average, :data:`LIP_RENEW`). ``"track"``: LK and the filter on the lip line
-        itself (the earlier behaviour): closed lips put an upper and a lower point on one patch, so
-        they move alike and the mouth does not open (reports/reproduction/real_clips_notes.md).
-    drift_correction : bool
-        Correct every frame's LK positions against the first frame's appearance (template update
-        with drift correction, Matthews, Ishikawa & Baker 2004): each landmark's first-frame patch
-        (its LK window, blurred) is aligned to the new frame by Gauss-Newton
-        (:func:`facebasis.capture.lk.template_align`) from the frame-to-frame position, under the
-        local affine deformation of the mesh since frame 0 (:func:`facebasis.capture.lk.local_affine`);
-        the result is accepted where it lies within ``drift_max_shift`` of the frame-to-frame
-        position and its zero-mean NCC with the template is at least ``drift_zncc``; otherwise the
-        frame-to-frame position stands. Accepted points count as confident measurements for the
-        filter. Without it, frame-to-frame LK errors add up over a take (drift).
-    drift_affine : bool
-        Solve for the affine part of the template warp too (started at the mesh's); False keeps the
-        mesh's affine and solves for the translation only.
-    drift_max_shift : float
-        Largest accepted correction, pixels at reference face size.
-    drift_zncc : float
-        Smallest accepted zero-mean NCC of the aligned patch with the first frame's.
-    drift_recovery : float
-        For a point lost in the previous frame, ``drift_max_shift`` is multiplied by this and the
-        NCC threshold raised halfway to 1, so the first frame's appearance can pull it back.
-    filter : FilterOptions
-    mesh : MeshOptions
-    """
-
-    use_filter: bool = True
-    refine_mesh: bool = True
-    mesh_spacing: float | None = None
-    lk_levels: int = 3
-    fb_threshold: float = 1.0
-    windows: dict | None = None
-    inner_lips: str = "follow"
-    drift_correction: bool = True
-    drift_affine: bool = True
-    drift_max_shift: float = 1.0
-    drift_zncc: float = 0.9
-    drift_recovery: float = 4.0
-    filter: FilterOptions = field(default_factory=FilterOptions)
-    mesh: MeshOptions = field(default_factory=MeshOptions)
 
 
 @dataclass(frozen=True)
@@ -157,6 +92,9 @@ class FaceTracker:
         self.opt = options
         if options.inner_lips not in INNER_LIPS:
             raise InputError(f"inner_lips: expected one of {', '.join(INNER_LIPS)}, found {options.inner_lips!r}")
+        if not (np.isfinite(options.outlier_distance) and options.outlier_distance >= 0):
+            raise InputError(f"outlier_distance: expected a number >= 0 (face widths; 0 = off), "
+                             f"found {options.outlier_distance!r}")
         gray = to_gray(first_frame)
         h, w = gray.shape
         lm = validate_landmarks(landmarks, "landmarks", size=(w, h))
@@ -179,6 +117,8 @@ class FaceTracker:
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
         self._lost_prev = np.zeros(L, bool)
+        self._lm0, self._width = lm.copy(), face_width(lm)
+        self._W = neighbour_weights(lm, options.filter.neighbour_sigma * face_width(lm))   # LK-failure prediction
         self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
         self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
@@ -205,6 +145,64 @@ class FaceTracker:
             self.filter.place(self._inner, out[self._inner])
         return out
 
+    def _predict_failed(self, lk):
+        """Where LK failed (status, forward-backward check, or a point off the frame), put the point at
+        its previous position moved by its confident neighbours' mean LK motion (Gaussian weights of
+        the first-frame distances, as the filter's motion model), so the drift correction starts from a
+        plausible place instead of LK's diverged guess (cap12 frame 618: the chin jumped 235 px and the
+        track collapsed)."""
+        w, h = self.size
+        pts = lk.points
+        inside = np.all(np.isfinite(pts), axis=1) & np.all((pts >= 0) & (pts <= [w - 1, h - 1]), axis=1)
+        ok = lk.ok & inside
+        if ok.all():
+            return lk
+        disp = np.where(ok[:, None], pts - self._lm, 0.0)
+        Wc = self._W * ok[None, :]
+        wsum = Wc.sum(1, keepdims=True)
+        pred = self._lm + (Wc @ disp) / np.maximum(wsum, 1e-12) * (wsum > 1e-3)
+        return replace(lk, points=np.where(ok[:, None], pts, pred), ok=ok)
+
+    def _repair_outliers(self, lm: np.ndarray, lost: np.ndarray):
+        """Points farther than ``outlier_distance`` face widths from where their neighbours' affine motion
+        since frame 0 puts them (:func:`neighbour_affine_prediction`, leave-one-out, the other points'
+        outliers left out) are moved there and reported lost. True shapes stay within 0.13 face widths
+        of that prediction (per-frame dlib on both shared clips, worst frame); a jaw-contour point that
+        slid along the silhouette and tangled with its neighbours (cap12, 25-50 px) does not."""
+        tau = self.opt.outlier_distance * self._width
+        if not tau > 0:
+            return lm, lost
+        conf = ~lost
+        conf[self._inner] = False
+        pred = neighbour_affine_prediction(self._lm0, lm, self._W, conf)
+        bad = np.linalg.norm(lm - pred, axis=1) > tau
+        if not bad.any():
+            return lm, lost
+        pred = neighbour_affine_prediction(self._lm0, lm, self._W, conf & ~bad)
+        bad &= np.linalg.norm(lm - pred, axis=1) > tau
+        lm = np.where(bad[:, None], pred, lm)
+        if self.filter is not None:
+            self.filter.place(np.flatnonzero(bad), lm[bad])
+        return lm, lost | bad
+
+    def _correct_drift(self, lk, prep):
+        """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
+        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+        p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
+                                 iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
+                                 affine_damping=DRIFT_DAMPING)
+        # a point lost in the previous frame or failed by LK in this one (started from its neighbours'
+        # motion) may be pulled back further, on a stricter match
+        far = self._lost_prev | ~lk.ok
+        reach = self.opt.drift_max_shift * self.scale * np.where(far, self.opt.drift_recovery, 1.0)
+        zmin = np.where(far, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
+        w, h = self.size
+        inside = np.all(np.isfinite(p), axis=1) & np.all((p >= 0) & (p <= [w - 1, h - 1]), axis=1)
+        with np.errstate(invalid="ignore"):
+            acc = inside & (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
+        self._drift_ok = acc
+        return replace(lk, points=np.where(acc[:, None], p, lk.points))
+
     def track(self, frame: np.ndarray, detections: np.ndarray | None = None,
               detection_sigma: np.ndarray | None = None) -> FrameResult:
         """Track the next frame.
@@ -229,21 +227,12 @@ class FaceTracker:
             raise InputError(f"frame: expected size {self.size[0]} x {self.size[1]}, "
                              f"found {gray.shape[1]} x {gray.shape[0]}")
         pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
-        lk = lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
-                      self.opt.fb_threshold * self.scale)
+        lk = self._predict_failed(lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
+                                           self.opt.fb_threshold * self.scale))
         prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         self._drift_ok = np.zeros(self.L, bool)
         if self.opt.drift_correction:
-            A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
-            p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
-                                     iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
-                                     affine_damping=DRIFT_DAMPING)
-            # a point lost in the previous frame may be pulled back further, on a stricter match
-            reach = self.opt.drift_max_shift * self.scale * np.where(self._lost_prev, self.opt.drift_recovery, 1.0)
-            zmin = np.where(self._lost_prev, 0.5 * (1.0 + self.opt.drift_zncc), self.opt.drift_zncc)
-            acc = (np.linalg.norm(p - lk.points, axis=1) <= reach) & (zn >= zmin)
-            self._drift_ok = acc
-            lk = replace(lk, points=np.where(acc[:, None], p, lk.points))
+            lk = self._correct_drift(lk, prep)
         if self.filter is not None:
             ok = lk.ok | self._drift_ok
             ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
@@ -254,8 +243,10 @@ class FaceTracker:
         self.lk_motion = lk.points - self._lm   # the tracked (drift-corrected) motion: detection noise estimate
         lost = np.asarray(lost, bool).copy()
         lost[self._inner] = lost[self._partner]
+        lm = self._follow_lips(lm, detections)
+        lm, lost = self._repair_outliers(lm, lost)
         self._lost_prev = lost.copy()
-        lm = np.clip(self._follow_lips(lm, detections), 0, [self.size[0] - 1, self.size[1] - 1])
+        lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])
         t1 = time.perf_counter()
         # harmonic initialisation from the landmark displacement (eq. 7-9), then LM (eq. 5)
         V_init = self._V + self.harmonic.solve(lm - self._lm)
@@ -270,66 +261,6 @@ class FaceTracker:
 
 def _u8(gray: np.ndarray) -> np.ndarray:
     return np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
-
-
-@dataclass(frozen=True)
-class CaptureResult:
-    """Result of :func:`capture`.
-
-    Attributes
-    ----------
-    capture : Capture
-        The tracked sequence (landmarks (T, L, 2), vertices (T, N, 2), faces, fps, size, lost).
-    out : Path or None
-        Output folder, if one was written.
-    seconds : dict
-        Wall time by stage: ``decode``, ``landmarks``, ``mesh``, ``detect``, ``output``.
-    """
-
-    capture: Capture
-    out: Path | None
-    seconds: dict
-
-    @property
-    def landmarks(self) -> np.ndarray:
-        return self.capture.landmarks
-
-    @property
-    def vertices(self) -> np.ndarray:
-        return self.capture.vertices
-
-    @property
-    def lost(self) -> np.ndarray:
-        return self.capture.lost
-
-
-def check_capture_args(video, landmarks, detector, out, max_frames, fps):
-    """Validate the arguments of :func:`capture` before any work; returns (source, landmarks, detector)."""
-    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
-                                   or max_frames < 1):
-        raise InputError(f"--max-frames: expected a positive integer, found {max_frames}")
-    if (landmarks is None) == (detector is None):
-        raise InputError("landmarks: expected exactly one of --landmarks FILE or --detector NAME, found "
-                         + ("both" if landmarks is not None else "neither"))
-    if out is not None:
-        o = Path(out)
-        if o.exists() and not o.is_dir():
-            raise InputError(f"output folder {o}: expected a folder or a new path, found a file")
-    src = video if isinstance(video, FrameSource) else open_frames(video, fps)
-    det = None
-    if detector is not None:
-        if isinstance(detector, str):
-            from .detect import get_detector
-
-            det = get_detector(detector)
-        else:
-            det = detector
-        lm = None
-    elif isinstance(landmarks, (str, os.PathLike)):
-        lm = validate_landmarks(read_landmarks(landmarks), f"landmark file {landmarks}", size=src.size)
-    else:
-        lm = validate_landmarks(landmarks, "landmarks", size=src.size)
-    return src, lm, det
 
 
 def capture(video, landmarks=None, detector=None, out=None, max_frames: int | None = None,
@@ -374,53 +305,82 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
     src, lm0, det = check_capture_args(video, landmarks, detector, out, max_frames, fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
     secs = {"decode": 0.0, "landmarks": 0.0, "mesh": 0.0, "detect": 0.0, "output": 0.0}
+    run = _Run(src, lm0, det, max_frames, overlay, options, detections_as_observations, progress, total, secs)
+    if out is None:
+        return CaptureResult(run(None), None, secs)
+    from facebasis.atomic import atomic_directory
 
-    def run(stage: Path | None):
-        frames = src.frames(max_frames)
+    out = Path(out)
+    with atomic_directory(out) as stage:
+        cap = run(stage)
+    cap = replace(cap, folder=out)
+    return CaptureResult(cap, out, secs)
+
+
+@dataclass
+class _Run:
+    """One :func:`capture` run over a checked source, timing each stage into ``secs``."""
+
+    src: object
+    lm0: np.ndarray | None
+    det: object
+    max_frames: int | None
+    overlay: bool
+    options: TrackerOptions
+    observe: bool
+    progress: Callable | None
+    total: int | None
+    secs: dict
+
+    def _timed(self, stage: str, fn, *args, **kw):
         t = time.perf_counter()
-        first = next(frames)
-        secs["decode"] += time.perf_counter() - t
-        nonlocal lm0
-        if lm0 is None:
-            t = time.perf_counter()
-            lm0 = det.detect(first)
-            secs["detect"] += time.perf_counter() - t
-            if lm0 is None:
+        r = fn(*args, **kw)
+        self.secs[stage] += time.perf_counter() - t
+        return r
+
+    def _start(self, first):
+        """First-frame landmarks (detected if not given), the tracker and the detection-noise estimate."""
+        det = self.det
+        if self.lm0 is None:
+            self.lm0 = self._timed("detect", det.detect, first)
+            if self.lm0 is None:
                 raise InputError(f"--detector {getattr(det, 'name', det)}: expected a face on the first frame of "
-                                 f"{src.path}, found none")
-        tracker = FaceTracker(first, lm0, options)
+                                 f"{self.src.path}, found none")
+        tracker = FaceTracker(first, self.lm0, self.options)
         noise = None
-        if det is not None and detections_as_observations:
+        if det is not None and self.observe:
             from .detect import DetectionNoise
 
-            fo = options.filter
+            fo = self.options.filter
             noise = DetectionNoise(tracker.L, prior=fo.detection_sigma * tracker.scale,
                                    floor=fo.measurement_sigma * tracker.scale)
-            noise.update(lm0, np.zeros_like(lm0))
+            noise.update(self.lm0, np.zeros_like(self.lm0))
+        return tracker, noise
+
+    def __call__(self, stage: Path | None) -> Capture:
+        src, det, secs = self.src, self.det, self.secs
+        frames = src.frames(self.max_frames)
+        first = self._timed("decode", next, frames)
+        tracker, noise = self._start(first)
         writer = None
-        if stage is not None and overlay:
+        if stage is not None and self.overlay:
             from .overlay import OverlayWriter, draw_overlay
 
             writer = OverlayWriter(stage / OVERLAY_FILE, src.fps, src.size)
         lms, Vs, losts = [tracker.first.landmarks], [tracker.first.vertices], [tracker.first.lost]
         try:
             if writer is not None:
-                t = time.perf_counter()
-                writer.write(draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, lm0))
-                secs["output"] += time.perf_counter() - t
-            if progress:
-                progress(1, total)
+                self._timed("output", lambda: writer.write(
+                    draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, self.lm0)))
+            if self.progress:
+                self.progress(1, self.total)
             while True:
-                t = time.perf_counter()
-                frame = next(frames, None)
-                secs["decode"] += time.perf_counter() - t
+                frame = self._timed("decode", next, frames, None)
                 if frame is None:
                     break
                 dets = None
-                if det is not None and detections_as_observations:
-                    t = time.perf_counter()
-                    d = det.detect(frame, near=lms[-1])
-                    secs["detect"] += time.perf_counter() - t
+                if det is not None and self.observe:
+                    d = self._timed("detect", det.detect, frame, near=lms[-1])
                     dets = d if d is not None and len(d) == tracker.L else None
                 res = tracker.track(frame, dets, None if noise is None else noise.sigma)
                 if noise is not None:
@@ -429,11 +389,10 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
                 Vs.append(res.vertices)
                 losts.append(res.lost)
                 if writer is not None:
-                    t = time.perf_counter()
-                    writer.write(draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost))
-                    secs["output"] += time.perf_counter() - t
-                if progress:
-                    progress(len(lms), total)
+                    self._timed("output", lambda: writer.write(
+                        draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost)))
+                if self.progress:
+                    self.progress(len(lms), self.total)
         finally:
             if writer is not None:
                 writer.close()
@@ -442,18 +401,5 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
         cap = Capture(np.stack(lms), np.stack(Vs), tracker.mesh.faces.copy(), float(src.fps), src.size,
                       np.stack(losts), None, Path(src.path) if src.kind == "video" else None)
         if stage is not None:
-            t = time.perf_counter()
-            write_capture(stage, cap)
-            secs["output"] += time.perf_counter() - t
+            self._timed("output", write_capture, stage, cap)
         return cap
-
-    if out is None:
-        cap = run(None)
-        return CaptureResult(cap, None, secs)
-    from facebasis.atomic import atomic_directory
-
-    out = Path(out)
-    with atomic_directory(out) as stage:
-        cap = run(stage)
-    cap = replace(cap, folder=out)
-    return CaptureResult(cap, out, secs)

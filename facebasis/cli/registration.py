@@ -1,7 +1,7 @@
 """Command-line command of scan registration: register.
 
 ``register(subparsers)`` adds it to the ``facebasis`` command; the handler only parses, calls
-:func:`facebasis.geometry.registration.register_files` and prints.
+:func:`facebasis.geometry.registerfiles.register_files` and prints.
 """
 
 from __future__ import annotations
@@ -11,9 +11,10 @@ from .outputs import Outputs
 
 
 def cmd_register(args) -> int:
-    from ..geometry.registration import register_files
+    from ..geometry.registerfiles import register_files
 
-    s = register_files(args.scans, args.template, args.out, args.landmarks, args.neutral, log=print)
+    s = register_files(args.scans, args.template, args.out, args.landmarks, args.neutral, log=print,
+                       identity_basis=args.identity_basis, expression_basis=args.expression_basis)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
 
@@ -35,5 +36,14 @@ def register(subparsers) -> None:
                         "names to such lists) and the template's landmark vertex indices, in the same order")
     p.add_argument("--neutral", default=None, metavar="NAME",
                    help="the neutral scan's file name or stem inside the folder (default: neutral)")
+    p.add_argument("--identity-basis", default=None, action=Once, metavar="DIR",
+                   help="folder of identity meshes in the template's topology (e.g. ICT-FaceKit's identity*.obj): the "
+                        "neutral scan is fitted in their space first, then refined non-rigidly; default: identity*.obj "
+                        "beside the template if any; 'none' to register without")
+    p.add_argument("--expression-basis", default=None, action=Once, metavar="DIR",
+                   help="folder of the template's expressions in its topology: each other scan is fitted as the "
+                        "registered neutral plus their transfer (weights in [0, 1.5]) first; default: the other meshes "
+                        "of the template's vertex count beside identity*.obj; 'none' to register without")
     p.set_defaults(func=cmd_register, outputs=Outputs(writes=(("out", "folder", "--out"),),
-                                                     reads=("scans", "template", "landmarks")))
+                                                     reads=("scans", "template", "landmarks", "identity_basis",
+                                                            "expression_basis")))

@@ -32,7 +32,6 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, MeshError
-from ..jsonio import read_json
 from .mesh import median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
@@ -176,24 +175,6 @@ def check_landmarks(template_landmarks, scan_landmarks, n_template: int, n_scan:
         elif s.ndim != 2 or s.shape[1] != 3 or not np.all(np.isfinite(s)):
             raise InputError(f"{scan_name}: expected k vertex indices or k finite [x, y, z] points, found shape {s.shape}")
     return t, s
-
-
-def read_landmarks(path: str | os.PathLike):
-    """Read a landmark JSON file: a list of vertex indices or of [x, y, z] points, or an object
-    ``{"landmarks": [...]}``, or (scan landmarks of a folder) an object mapping scan stems to lists."""
-    path = Path(path)
-    data = read_json(path, "a JSON list of vertex indices or [x, y, z] points", what="landmarks")
-    if isinstance(data, dict) and "landmarks" in data:
-        data = data["landmarks"]
-    if isinstance(data, dict):
-        return {str(k): v for k, v in data.items()}
-    if not isinstance(data, list):
-        raise InputError(f"landmarks {path}: expected a list of indices or points, found {type(data).__name__}")
-    try:
-        return np.asarray(data, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"landmarks {path}: expected a list of indices or [x, y, z] points, found ragged or "
-                         f"non-numeric entries") from exc
 
 
 class Registration:
@@ -363,129 +344,15 @@ def register_scan(template_V, template_F, scan_V, scan_F, options: RegistrationO
         scan_V, scan_F, scan_landmarks, start)
 
 
-#: the run's own file in the output folder: a scan of this stem would have its report overwritten
-SUMMARY_STEM = "summary"
+def register_files(*args, **kwargs) -> dict:
+    """Register scan files and write the results (:func:`.registerfiles.register_files`)."""
+    from .registerfiles import register_files as _register_files
+
+    return _register_files(*args, **kwargs)
 
 
-def _scan_files(scan_or_dir: Path) -> list[Path]:
-    from .meshio import MESH_SUFFIXES
+def read_landmarks(path):
+    """Read a landmark JSON file (:func:`.registerfiles.read_landmarks`)."""
+    from .registerfiles import read_landmarks as _read_landmarks
 
-    if scan_or_dir.is_dir():
-        named = sorted(p for p in scan_or_dir.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
-        broken = [p for p in named if p.is_symlink() and not p.exists()]
-        if broken:
-            raise InputError(f"scans {scan_or_dir}: expected readable scan files, found symbolic link(s) leading nowhere: "
-                             + ", ".join(f"{p.name} -> {os.readlink(p)}" for p in broken[:3]))
-        files = [p for p in named if p.is_file()]
-        if not files:
-            raise InputError(f"scans {scan_or_dir}: expected .obj or .ply files in the folder, found none")
-        stems = [p.stem for p in files]
-        dup = sorted({s for s in stems if stems.count(s) > 1})
-        if dup:
-            raise InputError(f"scans {scan_or_dir}: expected one file per name, found {dup[0]} twice (.obj and .ply)")
-    elif not scan_or_dir.exists():
-        raise InputError(f"scans {scan_or_dir}: expected a scan file or a folder of scans, found no such path")
-    else:
-        files = [scan_or_dir]
-    clash = [p for p in files if p.stem.casefold() == SUMMARY_STEM]
-    if clash:
-        raise InputError(f"scans {scan_or_dir}: expected scan names other than '{SUMMARY_STEM}' (the run writes "
-                         f"{SUMMARY_STEM}.json, which would overwrite the report {clash[0].stem}.json of this scan), "
-                         f"found {clash[0].name}; rename the scan")
-    return files
-
-
-def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
-                   options: RegistrationOptions | None = None, log=None) -> dict:
-    """Register a scan, or a folder of one person's scans, and write the results to ``out``.
-
-    Parameters
-    ----------
-    scan_or_dir : an OBJ/PLY scan, or a folder of them; in a folder the scan named ``neutral``
-        (``neutral.obj``/``.ply``, or ``neutral``'s stem) is registered first from the template and
-        the others from the registered neutral
-    template : the template neutral (OBJ/PLY)
-    out : output folder: ``<stem>.obj`` (template topology) and ``<stem>.json`` (report) per scan,
-        and ``summary.json``; written atomically (all or nothing)
-    landmarks : ``(SCAN_LM.json, TEMPLATE_LM.json)`` or None; for a folder, SCAN_LM.json maps scan
-        stems to landmark lists (scans it does not name get none)
-    neutral : the neutral scan's file name or stem in a folder (default ``neutral``)
-
-    Every input is read and checked before any registration starts.
-
-    Returns
-    -------
-    summary : dict with one report per scan, in registration order
-    """
-    from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
-    from .meshio import read_mesh, write_mesh
-    from .objlayout import copy_side_files, read_obj_layout
-
-    log = log or (lambda *a: None)
-    src = Path(scan_or_dir)
-    files = _scan_files(src)
-    T_V, T_F = read_mesh(template)
-    layout = read_obj_layout(template)  # UVs, materials, polygons of an OBJ template, kept in the outputs
-    t_lm = s_lm = None
-    if landmarks is not None:
-        s_path, t_path = landmarks
-        t_lm = read_landmarks(t_path)
-        if isinstance(t_lm, dict):
-            raise InputError(f"template landmarks {t_path}: expected a list of template vertex indices, found an object")
-        s_lm = read_landmarks(s_path)
-        if src.is_dir() and not isinstance(s_lm, dict):
-            raise InputError(f"scan landmarks {s_path}: expected an object mapping scan names to landmark lists "
-                             f"when registering a folder, found a list")
-        if not src.is_dir() and isinstance(s_lm, dict):
-            s_lm = s_lm.get(files[0].stem, s_lm.get(files[0].name))
-            if s_lm is None:
-                raise InputError(f"scan landmarks {s_path}: expected an entry for {files[0].stem}, found none")
-        if len(t_lm) != (len(s_lm) if not isinstance(s_lm, dict) else len(t_lm)):
-            raise InputError(f"scan landmarks {s_path} and template landmarks {t_path}: expected the same number "
-                             f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
-        check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
-    reg = Registration(T_V, T_F, options, t_lm, name=str(template))
-    order = files
-    if src.is_dir() and len(files) > 1:
-        want = neutral or "neutral"
-        hit = [p for p in files if p.name == want or p.stem == want]
-        if not hit:
-            raise InputError(f"scans {src}: expected a neutral scan named '{want}' (.obj/.ply) to register first, "
-                             f"found {', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}; "
-                             "name it with --neutral")
-        order = hit + [p for p in files if p is not hit[0]]
-    elif neutral is not None and not src.is_dir():
-        raise InputError(f"--neutral {neutral}: expected a folder of scans, found the single file {src}")
-    scans = []
-    for p in order:  # read and check every scan before any work
-        V, F = read_mesh(p)
-        lm = s_lm.get(p.stem, s_lm.get(p.name)) if isinstance(s_lm, dict) else s_lm
-        if lm is not None:
-            if len(lm) != len(t_lm):
-                raise InputError(f"scan landmarks for {p.name} and template landmarks: expected the same number of "
-                                 f"landmarks, found {len(lm)} and {len(t_lm)}")
-        V, F, _ = reg.check_scan(V, F, str(p), lm)
-        scans.append((p, V, F, lm))
-    summary = {"template": str(template), "scans": []}
-    with atomic_directory(out) as stage:
-        start = None
-        for k, (p, V, F, lm) in enumerate(scans):
-            res = reg.register(V, F, lm, start=start, name=str(p))
-            if k == 0 and len(scans) > 1:
-                start = res.vertices
-            if layout is not None and layout.matches(len(res.vertices), reg.F):
-                atomic_write_bytes(stage / f"{p.stem}.obj", layout.obj_bytes(res.vertices))
-            else:
-                write_mesh(stage / f"{p.stem}.obj", res.vertices, reg.F)
-            rep = {"scan": str(p), "scan_vertices": int(len(V)), "template": str(template),
-                   "started_from": "template" if (k == 0 or len(scans) == 1) else f"{scans[0][0].stem}.obj",
-                   **res.report()}
-            atomic_write_json(stage / f"{p.stem}.json", rep)
-            summary["scans"].append(rep)
-            r = rep["residual"] or {}
-            log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
-                f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
-                f"{rep['iterations']} iterations, {rep['seconds']:.1f} s")
-        copy_side_files(layout, stage)
-        atomic_write_json(stage / "summary.json", summary)
-    return summary
+    return _read_landmarks(path)

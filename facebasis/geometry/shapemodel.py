@@ -132,7 +132,8 @@ class ModelFitOptions:
     ----------
     iterations : closest-point / Gauss-Newton rounds at most
     prior : ``mu`` of the module's energy (unit-free: times ``h^2``)
-    max_distance : pairs farther than this many ``h`` are dropped (and farther than 3 x the median)
+    max_distance : pairs farther than this many ``h`` are dropped (and farther than 3 x the median
+        and 2 ``h``)
     normal_angle : degrees; pairs whose normals differ more are dropped
     scale : also fit a uniform scale (another person; not for one person's expressions)
     tolerance : stop when the largest vertex step is below this many ``h``
@@ -172,13 +173,13 @@ class ModelFit:
     iterations: int
 
 
-def _pairs(X, normals, surface, dmax, cos_max, use):
+def _pairs(X, normals, surface, dmax, cos_max, use, floor):
     """Kept model-to-scan pairs: indices, targets, scan normals (the tangent plane of the nearest scan
     vertex, as the non-rigid stage's point-to-plane term; one bounded tree query)."""
     U, N, dist, rim = surface.nearest_planes(X[use], True, dmax)
     ok = (~rim) & (dist <= dmax) & ((normals[use] * N).sum(1) >= cos_max)
     if ok.sum() > 10:
-        ok &= dist <= max(3.0 * float(np.median(dist[ok])), 1e-12)
+        ok &= dist <= max(3.0 * float(np.median(dist[ok])), floor)
     return use[ok], U[ok], N[ok]
 
 
@@ -234,7 +235,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     rms, kept, it = np.inf, 0, 0
     X = pose.apply(base + (c @ Dflat).reshape(n, 3))
     for it in range(1, options.iterations + 1):
-        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use)
+        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 2.0 * h)
         kept = len(idx)
         if kept < npose + 3:
             break

@@ -133,7 +133,7 @@ class ModelFitOptions:
     iterations : closest-point / Gauss-Newton rounds at most
     prior : ``mu`` of the module's energy (unit-free: times ``h^2``)
     max_distance : pairs farther than this many ``h`` are dropped (and farther than 3 x the median
-        and 2 ``h``)
+        and h / 2)
     normal_angle : degrees; pairs whose normals differ more are dropped
     scale : also fit a uniform scale (another person; not for one person's expressions)
     tolerance : stop when the largest vertex step is below this many ``h``
@@ -235,7 +235,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     rms, kept, it = np.inf, 0, 0
     X = pose.apply(base + (c @ Dflat).reshape(n, 3))
     for it in range(1, options.iterations + 1):
-        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 2.0 * h)
+        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 0.5 * h)
         kept = len(idx)
         if kept < npose + 3:
             break

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from ..errors import InputError
 from .common import Once
 from .outputs import Outputs
 
@@ -13,7 +14,10 @@ from .outputs import Outputs
 def cmd_register(args) -> int:
     from ..geometry.registerfiles import register_files
 
-    s = register_files(args.scans, args.template, args.out, args.landmarks, args.neutral, log=print,
+    lm = args.landmarks
+    if lm is not None and not (lm == ["auto"] or (len(lm) == 2 and "auto" not in lm)):
+        raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {' '.join(lm)}")
+    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=args.detector,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
@@ -31,9 +35,14 @@ def register(subparsers) -> None:
     p.add_argument("scans", metavar="SCAN_OR_DIR", help="scan (.obj/.ply, any topology) or folder of one person's scans")
     p.add_argument("--template", required=True, metavar="TEMPLATE_NEUTRAL.obj", help="template neutral mesh")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--landmarks", nargs=2, default=None, action=Once, metavar=("SCAN_LM.json", "TEMPLATE_LM.json"),
+    p.add_argument("--landmarks", nargs="+", default=None, action=Once, metavar="auto | SCAN_LM.json TEMPLATE_LM.json",
                    help="scan landmarks (vertex indices or [x, y, z] points; for a folder an object mapping scan "
-                        "names to such lists) and the template's landmark vertex indices, in the same order")
+                        "names to such lists) and the template's landmark vertex indices, in the same order; or "
+                        "'auto': found on each scan and on the template by a face detector on a front render "
+                        "(the template looks along +z, y up), lifted onto the surface; the number found and their "
+                        "residual are reported per scan")
+    p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
+                   help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",
                    help="the neutral scan's file name or stem inside the folder (default: neutral)")
     p.add_argument("--identity-basis", default=None, action=Once, metavar="DIR",

@@ -97,7 +97,7 @@ def _bases(template: Path, T_V, T_F, identity_basis, expression_basis, log):
 
 def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
                    options: RegistrationOptions | None = None, log=None, identity_basis=None,
-                   expression_basis=None) -> dict:
+                   expression_basis=None, detector: str | None = None) -> dict:
     """Register a scan, or a folder of one person's scans, and write the results to ``out``.
 
     Parameters
@@ -109,7 +109,9 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     out : output folder: ``<stem>.obj`` (template topology) and ``<stem>.json`` (report) per scan,
         and ``summary.json``; written atomically (all or nothing)
     landmarks : ``(SCAN_LM.json, TEMPLATE_LM.json)`` or None; for a folder, SCAN_LM.json maps scan
-        stems to landmark lists (scans it does not name get none)
+        stems to landmark lists (scans it does not name get none); or ``"auto"``: found on every scan
+        and on the template by a 2D detector on front renders (:mod:`.scanlandmarks`)
+    detector : with ``"auto"``: ``"dlib"`` or ``"mediapipe"`` (default: the installed one)
     neutral : the neutral scan's file name or stem in a folder (default ``neutral``)
     identity_basis : folder of identity meshes in the template's topology (the neutral is fitted in
         their space first), ``"none"``, or None: ``identity*.obj`` beside the template if any
@@ -132,8 +134,19 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     files = _scan_files(src)
     T_V, T_F = read_mesh(template)
     layout = read_obj_layout(template)  # UVs, materials, polygons of an OBJ template, kept in the outputs
-    t_lm = s_lm = None
-    if landmarks is not None:
+    t_lm = s_lm = det = None
+    auto = isinstance(landmarks, str) or (isinstance(landmarks, (list, tuple)) and list(landmarks) == ["auto"])
+    if detector is not None and not auto:
+        raise InputError(f"--detector {detector}: expected together with --landmarks auto, found "
+                         f"{'no --landmarks' if landmarks is None else '--landmarks with files'}")
+    if auto:
+        from ..capture.detect import available_detector, get_detector
+
+        if str(landmarks if isinstance(landmarks, str) else landmarks[0]) != "auto":
+            raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {landmarks!r}")
+        det = get_detector(detector or available_detector(), video=False)
+        s_lm = "auto"
+    elif landmarks is not None:
         s_path, t_path = landmarks
         t_lm = read_landmarks(t_path)
         if isinstance(t_lm, dict):
@@ -151,7 +164,8 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
                              f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
         check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
     ident, expr = _bases(Path(template), T_V, T_F, identity_basis, expression_basis, log)
-    reg = Registration(T_V, T_F, options, t_lm, name=str(template), identity=ident, expressions=expr)
+    reg = Registration(T_V, T_F, options, t_lm, name=str(template), identity=ident, expressions=expr,
+                       detector=det)
     order = files
     if src.is_dir() and len(files) > 1:
         want = neutral or "neutral"
@@ -167,11 +181,11 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     for p in order:  # read and check every scan before any work
         V, F = read_mesh(p)
         lm = s_lm.get(p.stem, s_lm.get(p.name)) if isinstance(s_lm, dict) else s_lm
-        if lm is not None:
+        if lm is not None and not auto:
             if len(lm) != len(t_lm):
                 raise InputError(f"scan landmarks for {p.name} and template landmarks: expected the same number of "
                                  f"landmarks, found {len(lm)} and {len(t_lm)}")
-        V, F, _ = reg.check_scan(V, F, str(p), lm)
+        V, F, _ = reg.check_scan(V, F, str(p), None if auto else lm)
         scans.append((p, V, F, lm))
     summary = {"template": str(template), "scans": []}
     with atomic_directory(out) as stage:
@@ -194,6 +208,11 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
                 f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
                 f"{rep['iterations']} iterations, {rep['seconds']:.1f} s" + _model_line(rep))
+            if auto:
+                le = rep["landmark_error"]
+                log(f"{p.name}: landmarks found on the scan and the template: {rep['landmarks_found']}, used (within "
+                    f"2 edge lengths of the fitted mesh): {rep['landmarks_used']}"
+                    + (f"; residual after registration mean {le['mean']:.4g}, max {le['max']:.4g}" if le else ""))
         copy_side_files(layout, stage)
         atomic_write_json(stage / "summary.json", summary)
     return summary

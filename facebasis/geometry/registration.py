@@ -58,6 +58,8 @@ class RegistrationOptions:
         has an identity basis
     expression_fit : the expression fit of an expression scan, when expressions are given
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
+    auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
+        non-rigid stage's landmark weights
     expression_max : upper bound of the expression weights (lower bound 0). Above 1: a person's
         expression may be stronger than the template's (ICT person of ``problems.generation``, its
         jawOpen 1.4 x the template's: p95 0.57 cm with weights in [0, 1], 0.21 cm in [0, 1.5])
@@ -71,6 +73,7 @@ class RegistrationOptions:
     expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4))
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
+    auto_landmark_weight: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -90,6 +93,8 @@ class RegistrationResult:
     model : the identity or expression fit before the non-rigid stage (None without a basis)
     model_kind : ``"identity"``, ``"expressions"`` or None
     model_names : the basis meshes' names (for the report)
+    landmarks_found : with landmarks found on the scan (``"auto"``): (found on both the scan and the
+        template, used: within 2 edge lengths of the mesh before the non-rigid stage); None otherwise
     """
 
     vertices: np.ndarray
@@ -103,6 +108,7 @@ class RegistrationResult:
     model: ModelFit | None = None
     model_kind: str | None = None
     model_names: tuple = ()
+    landmarks_found: tuple | None = None
 
     def report(self) -> dict:
         """Summary as plain JSON types (distances in scan units)."""
@@ -115,7 +121,9 @@ class RegistrationResult:
             "residual": stats(d),
             "residual_note": "distance of the vertices that found scan surface to the scan, scan units",
             "iterations": int(self.iterations),
-            "landmark_error": None if lm is None else {"mean": float(lm.mean()), "max": float(lm.max())},
+            "landmark_error": None if lm is None or not len(lm) else {"mean": float(lm.mean()), "max": float(lm.max())},
+            **({} if self.landmarks_found is None else {"landmarks_found": int(self.landmarks_found[0]),
+                                                          "landmarks_used": int(self.landmarks_found[1])}),
             "no_surface_vertices": int(self.no_surface.sum()),
             "no_surface_fraction": float(self.no_surface.mean()),
             "rigid": {**self.similarity.as_dict(), "trimmed_rms_template_units": float(self.rigid_score)},
@@ -186,10 +194,20 @@ class Registration:
     options : :class:`RegistrationOptions`
     landmarks : (k,) template vertex indices used when scan landmarks are given
     name : the template's name in messages
+    identity : identity basis (:class:`.shapemodel.ShapeBasis`): a scan registered from the template
+        is fitted in its space first
+    expressions : the template's expressions (:meth:`person_expressions` carries them to a person)
+    detector : a 2D face detector (:func:`facebasis.capture.detect.get_detector`): enables
+        ``scan_landmarks="auto"`` (:mod:`.scanlandmarks`); the template's own are found here
+
+    Raises
+    ------
+    InputError
+        A basis of another shape; with a detector, no face on the template's front render.
     """
 
     def __init__(self, V, F, options: RegistrationOptions | None = None, landmarks=None, name: str = "template",
-                 identity: ShapeBasis | None = None, expressions: ShapeBasis | None = None):
+                 identity: ShapeBasis | None = None, expressions: ShapeBasis | None = None, detector=None):
         self.V, self.F = validate_mesh(V, F, name, check_degenerate=False)
         self.name = name
         self.options = options or RegistrationOptions()
@@ -204,6 +222,11 @@ class Registration:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
                                  f"{name}, found {basis.deltas.shape}")
         self.identity, self.expressions = identity, expressions
+        self.auto = None
+        if detector is not None:  # landmarks found on scans: the template's own, found once
+            from .scanlandmarks import AutoLandmarks
+
+            self.auto = AutoLandmarks(self.V, self.F, detector, name)
 
     def person_expressions(self, neutral: np.ndarray, transfer: str = "deformation") -> np.ndarray:
         """The template's expressions carried onto a person's registered neutral, in its frame.
@@ -264,7 +287,8 @@ class Registration:
         Parameters
         ----------
         V : (N, 3) scan vertices, F : (M, 3) scan triangles (any topology, holes allowed)
-        scan_landmarks : (k,) scan vertex indices or (k, 3) points, matching the template landmarks
+        scan_landmarks : (k,) scan vertex indices or (k, 3) points, matching the template landmarks,
+            or ``"auto"``: found on the scan (needs a ``detector``), after the rigid stage
         start : (n, 3) start mesh in the template's topology (e.g. the person's registered neutral,
             in any frame); default the template neutral (then fitted in the identity basis first,
             if the template has one)
@@ -277,7 +301,10 @@ class Registration:
         -------
         RegistrationResult
         """
-        V, F, lm_pts = self.check_scan(V, F, name, scan_landmarks)
+        auto = isinstance(scan_landmarks, str) and scan_landmarks == "auto"
+        if auto and self.auto is None:
+            raise InputError(f"{name}: landmarks 'auto' need a detector (Registration(..., detector=...))")
+        V, F, lm_pts = self.check_scan(V, F, name, None if auto else scan_landmarks)
         P = self.V
         if start is not None:
             P = validate_mesh(start, self.F, f"{name}: start mesh", check_degenerate=False)[0]
@@ -303,17 +330,37 @@ class Registration:
         inv = sim.inverse()
         surface_t = surface.moved(inv.apply(V))
         lm_t = inv.apply(lm_pts) if lm_pts is not None else None
+        lm_idx = self.landmarks if lm_pts is not None else None
         opts = self.options.nricp if start is None else self.options.nricp_from_start
         h = median_edge_length(P, self.F)
         model, kind, names = self._fit_model(P, surface_t, h, start is None, expressions)
         if model is not None:
             P, opts = model.vertices, self.options.nricp_after_model
             h = median_edge_length(P, self.F)
-        res = self.nricp.fit(P, surface_t, opts, self.landmarks if lm_pts is not None else None, lm_t, h=h)
+        if auto:
+            lm_idx, lm_t, found = self._auto_landmarks(P, surface_t, F, h, start is not None)
+            lm_pts = sim.apply(lm_t) if lm_t is not None else None
+        if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
+            opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
+                                                                   for w in opts.landmark_weight))
+        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h)
         X = sim.apply(res.vertices)
-        lm_err = np.linalg.norm(X[self.landmarks] - lm_pts, axis=1) if lm_pts is not None else None
+        lm_err = np.linalg.norm(X[lm_idx] - lm_pts, axis=1) if lm_pts is not None else None
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
-                                  lm_err, time.perf_counter() - t0, model, kind, names)
+                                  lm_err, time.perf_counter() - t0, model, kind, names,
+                                  (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
+
+    def _auto_landmarks(self, P, surface_t, F, h, from_start: bool):
+        """Landmarks found on the scan (:mod:`.scanlandmarks`), seen from the template's front, as
+        ``(template indices, points in P's frame)`` or ``(None, None)``. Pairs farther than 2 ``h``
+        from the current mesh ``P`` (after the rigid stage and any model fit) are dropped: a detection
+        lifted into a hole or a socket, or a detector that places a point differently on two faces
+        (on untextured renders of two ICT persons in their true pose: 1.2 cm apart on average)."""
+        g = umeyama(self.V, P) if from_start else Similarity()  # P's frame -> the template's: g^-1
+        idx, pts = self.auto.on_scan(g.inverse().apply(surface_t.V), F)
+        pts = g.apply(pts)
+        ok = np.linalg.norm(P[idx] - pts, axis=1) <= 2.0 * h
+        return (idx[ok], pts[ok], len(idx)) if ok.sum() >= 3 else (None, None, len(idx))
 
     def _fit_model(self, P, surface_t, h, from_template: bool, expressions):
         """The identity fit (from the template, with a basis) or the expression fit (with

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, MeshError
-from .mesh import median_edge_length, validate_mesh
+from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
@@ -217,6 +217,11 @@ class Registration:
         self.h = median_edge_length(self.V, self.F)
         self.diagonal = _bbox_diagonal(self.V)
         self.nricp = NonRigidICP(self.F, len(self.V))
+        # a template of several parts (ICT-FaceKit's full head: skin, eyeballs, teeth, gums, ...): the
+        # skin (the largest part) meets the scan; the other parts follow the model fit (or stay rigid)
+        labels = connected_components(self.F, len(self.V))
+        count = np.bincount(labels)
+        self.skin = np.flatnonzero(labels == np.argmax(count)) if len(count) > 1 else None
         for basis, what in ((identity, "identity basis"), (expressions, "expression basis")):
             if basis is not None and basis.deltas.shape[1:] != self.V.shape:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
@@ -344,7 +349,11 @@ class Registration:
             opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
                                                                    for w in opts.landmark_weight))
         res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h)
-        X = sim.apply(res.vertices)
+        Xt = res.vertices
+        if self.skin is not None:  # the other parts have no scan surface: keep them where the fit put them
+            Xt = P.copy()
+            Xt[self.skin] = res.vertices[self.skin]
+        X = sim.apply(Xt)
         lm_err = np.linalg.norm(X[lm_idx] - lm_pts, axis=1) if lm_pts is not None else None
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
                                   lm_err, time.perf_counter() - t0, model, kind, names,
@@ -367,11 +376,12 @@ class Registration:
         ``expressions``) of :mod:`.shapemodel`; ``(None, None, ())`` otherwise."""
         normals = self.nricp.vertex_normals
         if from_template and self.identity is not None:
-            fit = fit_shape_model(P, self.identity.deltas, surface_t, normals, h, self.options.identity_fit)
+            fit = fit_shape_model(P, self.identity.deltas, surface_t, normals, h, self.options.identity_fit,
+                                  use=self.skin)
             return fit, "identity", tuple(self.identity.names)
         if expressions is not None:
             fit = fit_shape_model(P, np.asarray(expressions, float), surface_t, normals, h, self.options.expression_fit,
-                                  bounds=(0.0, self.options.expression_max))
+                                  bounds=(0.0, self.options.expression_max), use=self.skin)
             names = tuple(self.expressions.names) if self.expressions is not None and \
                 len(self.expressions.names) == len(expressions) else tuple(f"e{k}" for k in range(len(expressions)))
             return fit, "expressions", names

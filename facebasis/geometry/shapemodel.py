@@ -212,7 +212,8 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     h : length unit (the template's median edge length)
     sigma : (K,) prior standard deviation of each coefficient (default 1)
     bounds : ``(lo, hi)`` arrays (K,) or scalars, or None (unbounded)
-    use : vertices that may pair with the scan (default all)
+    use : vertices that may pair with the scan (default all; at most ``options.samples`` of them, a
+        seeded sample, are used)
     c0 : (K,) start coefficients (default 0, or clipped into the bounds)
 
     Returns
@@ -224,10 +225,9 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     lo, hi = (np.full(K, -np.inf), np.full(K, np.inf)) if bounds is None else (
         np.broadcast_to(np.asarray(bounds[0], float), (K,)), np.broadcast_to(np.asarray(bounds[1], float), (K,)))
     c = np.clip(np.zeros(K) if c0 is None else np.asarray(c0, float), lo, hi)
-    if use is None:  # a seeded sample of the vertices: the fit has few unknowns
-        use = np.arange(n) if n <= options.samples else np.sort(
-            np.random.default_rng(options.seed).choice(n, options.samples, replace=False))
-    use = np.asarray(use)
+    use = np.arange(n) if use is None else np.asarray(use)
+    if len(use) > options.samples:  # a seeded sample of the vertices: the fit has few unknowns
+        use = np.sort(use[np.random.default_rng(options.seed).choice(len(use), options.samples, replace=False)])
     npose = 7 if options.scale else 6
     pose = Similarity()
     Dflat = deltas.reshape(K, -1)

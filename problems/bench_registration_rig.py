@@ -149,7 +149,7 @@ def _write(rows: list, path: Path) -> None:
             w.writerow({k: (f"{v:.5g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
-def write_markdown(out: Path) -> None:
+def write_markdown(out: Path, argv=None) -> None:
     """``rig.md`` from ``rig.csv`` and ``rig_scans.csv`` (the one source of the figures)."""
     import sys
 
@@ -159,7 +159,8 @@ def write_markdown(out: Path) -> None:
 
     f = lambda v: f"{float(v):.3f}"  # noqa: E731
     lines = ["# Rigs from registered scans vs exact examples (ICT persons, no landmarks, cm)", "",
-             "Command: `python -m problems.bench_registration_rig " + " ".join(sys.argv[1:]) + "`", "",
+             "Command: `python -m problems.bench_registration_rig "
+             + " ".join(sys.argv[1:] if argv is None else argv) + "`", "",
              "Targets: correspondence median <= 0.05 cm and p95 <= 0.2 cm on every scan; held-out ratio "
              "(registered / exact) <= 1.25; <= 10 s per scan. Method `modes K`: identity basis = ICT's first K "
              "modes (persons are built from all 100), expressions = ICT's 53 by deformation transfer; `baseline`: "
@@ -195,6 +196,8 @@ def main(argv=None):
     if args.table_only:
         return write_markdown(Path(args.out))
     summary, scans = [], []
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     for seed in args.seeds:
         for kind in args.persons:
             pp = person(seed, args.train, kind == "detail")
@@ -202,11 +205,9 @@ def main(argv=None):
                 row, rows = run_method(pp, k, seed, kind)
                 summary.append(row)
                 scans += rows
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    _write(summary, out / "rig.csv")
-    _write(scans, out / "rig_scans.csv")
-    write_markdown(out)
+                _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept
+                _write(scans, out / "rig_scans.csv")
+                write_markdown(out, argv)
     return summary
 
 

@@ -70,7 +70,8 @@ class RegistrationOptions:
     nricp_from_start: NricpOptions = field(default_factory=NricpOptions)
     unit_ratio: float = UNIT_RATIO
     identity_fit: ModelFitOptions = field(default_factory=ModelFitOptions)
-    expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4))
+    expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4,
+                                                                                    prior_start=1e-2))
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1

@@ -139,6 +139,9 @@ class ModelFitOptions:
     tolerance : stop when the largest vertex step is below this many ``h``
     samples : at most this many model vertices (a seeded sample) pair with the scan
     seed : seed of that sample
+    prior_start : if set, ``mu`` starts here and falls geometrically to ``prior`` over the first half
+        of the iterations (graduated: a strong prior first finds the basin, e.g. an opened jaw rather
+        than lips closed over the scan's mouth hole, where no data says otherwise)
     """
 
     iterations: int = 40
@@ -149,6 +152,7 @@ class ModelFitOptions:
     tolerance: float = 1e-3
     samples: int = 5000
     seed: int = 0
+    prior_start: float | None = None
 
 
 @dataclass(frozen=True)
@@ -249,7 +253,9 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         RN = pose.scale * (N @ pose.rotation)
         Jc = np.einsum("kpj,pj->pk", deltas[:, idx, :], RN)
         w = 1.0 / np.sqrt(kept)
-        lam = np.sqrt(options.prior) * h / sigma
+        mu = options.prior if options.prior_start is None else options.prior_start * (
+            options.prior / options.prior_start) ** min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
+        lam = np.sqrt(mu) * h / sigma
         A = np.block([[w * Jp, w * Jc], [np.zeros((K, npose)), np.diag(lam)]])
         b = np.concatenate([-w * r0, -lam * c])
         lb = np.concatenate([np.full(npose, -np.inf), lo - c])
@@ -262,6 +268,6 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         X_new = pose.apply(base + (c @ Dflat).reshape(n, 3))
         step = float(np.abs(X_new - X).max())
         X = X_new
-        if step < options.tolerance * h:
+        if step < options.tolerance * h and (options.prior_start is None or mu == options.prior):
             break
     return ModelFit(X, c, pose, rms, kept, it)

@@ -18,7 +18,8 @@ def cmd_register(args) -> int:
     if lm is not None and not (lm == ["auto"] or (len(lm) == 2 and "auto" not in lm)):
         raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {' '.join(lm)}")
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=args.detector,
-                       identity_basis=args.identity_basis, expression_basis=args.expression_basis)
+                       identity_basis=args.identity_basis, expression_basis=args.expression_basis,
+                       expression_transfer=args.expression_transfer)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
 
@@ -41,6 +42,9 @@ def register(subparsers) -> None:
                         "'auto': found on each scan and on the template by a face detector on a front render "
                         "(the template looks along +z, y up), lifted onto the surface; the number found and their "
                         "residual are reported per scan")
+    p.add_argument("--expression-transfer", default="deformation", action=Once, choices=("deformation", "linear"),
+                   help="how the expression basis is carried onto the person's registered neutral: deformation "
+                        "transfer (default) or the template's displacements as they are (ICT-FaceKit's own convention)")
     p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
                    help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",

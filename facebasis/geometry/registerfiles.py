@@ -97,7 +97,7 @@ def _bases(template: Path, T_V, T_F, identity_basis, expression_basis, log):
 
 def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
                    options: RegistrationOptions | None = None, log=None, identity_basis=None,
-                   expression_basis=None, detector: str | None = None) -> dict:
+                   expression_basis=None, detector: str | None = None, expression_transfer: str = "deformation") -> dict:
     """Register a scan, or a folder of one person's scans, and write the results to ``out``.
 
     Parameters
@@ -112,6 +112,9 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
         stems to landmark lists (scans it does not name get none); or ``"auto"``: found on every scan
         and on the template by a 2D detector on front renders (:mod:`.scanlandmarks`)
     detector : with ``"auto"``: ``"dlib"`` or ``"mediapipe"`` (default: the installed one)
+    expression_transfer : how the expression basis is carried to the person's registered neutral:
+        ``"deformation"`` (deformation transfer) or ``"linear"`` (the template's displacements, as
+        ICT-FaceKit defines its expressions: identity-independent deltas)
     neutral : the neutral scan's file name or stem in a folder (default ``neutral``)
     identity_basis : folder of identity meshes in the template's topology (the neutral is fitted in
         their space first), ``"none"``, or None: ``identity*.obj`` beside the template if any
@@ -130,6 +133,8 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     from .objlayout import copy_side_files, read_obj_layout
 
     log = log or (lambda *a: None)
+    if expression_transfer not in ("deformation", "linear"):
+        raise InputError(f"--expression-transfer: expected 'deformation' or 'linear', found {expression_transfer!r}")
     src = Path(scan_or_dir)
     files = _scan_files(src)
     T_V, T_F = read_mesh(template)
@@ -194,7 +199,7 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             res = reg.register(V, F, lm, start=start, name=str(p), expressions=E)
             if k == 0 and len(scans) > 1:
                 start = res.vertices
-                E = reg.person_expressions(start) if expr is not None else None
+                E = reg.person_expressions(start, expression_transfer) if expr is not None else None
             if layout is not None and layout.matches(len(res.vertices), reg.F):
                 atomic_write_bytes(stage / f"{p.stem}.obj", layout.obj_bytes(res.vertices))
             else:

@@ -98,7 +98,8 @@ def test_cli_bad_landmark_options(tmp_path, capsys, args, message):
 
 
 @pytest.mark.parametrize("args", [["--detector", "dlib", "--detector", "dlib"], ["--detector", "opencv"],
-                                  ["--landmarks", "auto", "--landmarks", "auto"]])
+                                  ["--landmarks", "auto", "--landmarks", "auto"], ["--expression-transfer", "affine"],
+                                  ["--expression-transfer", "linear", "--expression-transfer", "linear"]])
 def test_cli_detector_option_once_and_known(tmp_path, capsys, args):
     with pytest.raises(SystemExit) as e:
         main(["register", "s.obj", "--template", "t.obj", "--out", str(tmp_path / "o")] + args)

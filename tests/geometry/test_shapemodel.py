@@ -147,6 +147,12 @@ def test_an_empty_basis_folder_is_refused(files):
     assert not (files / "out").exists()
 
 
+def test_an_unknown_expression_transfer_is_refused(files):
+    with pytest.raises(InputError, match="--expression-transfer: expected 'deformation' or 'linear', found 'affine'"):
+        register_files(files / "scan.obj", files / "t.obj", files / "out", expression_transfer="affine")
+    assert not (files / "out").exists()
+
+
 def test_a_scan_without_faces_is_refused_with_a_basis(files):
     (files / "cloud.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
     with pytest.raises(FacebasisError, match="cloud.obj: expected vertices and faces, found 3 vertices and 0 faces"):

@@ -95,6 +95,41 @@ def _bases(template: Path, T_V, T_F, identity_basis, expression_basis, log):
     return out
 
 
+def _landmark_inputs(landmarks, detector, src: Path, files: list, T_V):
+    """The landmarks of a run, read and checked: ``(template landmarks, scan landmarks, detector, auto)``;
+    the scan landmarks are a list, an object mapping scan names to lists, or ``"auto"``."""
+    t_lm = s_lm = det = None
+    auto = isinstance(landmarks, str) or (isinstance(landmarks, (list, tuple)) and list(landmarks) == ["auto"])
+    if detector is not None and not auto:
+        raise InputError(f"--detector {detector}: expected together with --landmarks auto, found "
+                         f"{'no --landmarks' if landmarks is None else '--landmarks with files'}")
+    if auto:
+        from ..capture.detect import available_detector, get_detector
+
+        if str(landmarks if isinstance(landmarks, str) else landmarks[0]) != "auto":
+            raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {landmarks!r}")
+        det = get_detector(detector or available_detector(), video=False)
+        s_lm = "auto"
+    elif landmarks is not None:
+        s_path, t_path = landmarks
+        t_lm = read_landmarks(t_path)
+        if isinstance(t_lm, dict):
+            raise InputError(f"template landmarks {t_path}: expected a list of template vertex indices, found an object")
+        s_lm = read_landmarks(s_path)
+        if src.is_dir() and not isinstance(s_lm, dict):
+            raise InputError(f"scan landmarks {s_path}: expected an object mapping scan names to landmark lists "
+                             f"when registering a folder, found a list")
+        if not src.is_dir() and isinstance(s_lm, dict):
+            s_lm = s_lm.get(files[0].stem, s_lm.get(files[0].name))
+            if s_lm is None:
+                raise InputError(f"scan landmarks {s_path}: expected an entry for {files[0].stem}, found none")
+        if len(t_lm) != (len(s_lm) if not isinstance(s_lm, dict) else len(t_lm)):
+            raise InputError(f"scan landmarks {s_path} and template landmarks {t_path}: expected the same number "
+                             f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
+        check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
+    return t_lm, s_lm, det, auto
+
+
 def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
                    options: RegistrationOptions | None = None, log=None, identity_basis=None,
                    expression_basis=None, detector: str | None = None, expression_transfer: str = "deformation") -> dict:
@@ -139,35 +174,7 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     files = _scan_files(src)
     T_V, T_F = read_mesh(template)
     layout = read_obj_layout(template)  # UVs, materials, polygons of an OBJ template, kept in the outputs
-    t_lm = s_lm = det = None
-    auto = isinstance(landmarks, str) or (isinstance(landmarks, (list, tuple)) and list(landmarks) == ["auto"])
-    if detector is not None and not auto:
-        raise InputError(f"--detector {detector}: expected together with --landmarks auto, found "
-                         f"{'no --landmarks' if landmarks is None else '--landmarks with files'}")
-    if auto:
-        from ..capture.detect import available_detector, get_detector
-
-        if str(landmarks if isinstance(landmarks, str) else landmarks[0]) != "auto":
-            raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {landmarks!r}")
-        det = get_detector(detector or available_detector(), video=False)
-        s_lm = "auto"
-    elif landmarks is not None:
-        s_path, t_path = landmarks
-        t_lm = read_landmarks(t_path)
-        if isinstance(t_lm, dict):
-            raise InputError(f"template landmarks {t_path}: expected a list of template vertex indices, found an object")
-        s_lm = read_landmarks(s_path)
-        if src.is_dir() and not isinstance(s_lm, dict):
-            raise InputError(f"scan landmarks {s_path}: expected an object mapping scan names to landmark lists "
-                             f"when registering a folder, found a list")
-        if not src.is_dir() and isinstance(s_lm, dict):
-            s_lm = s_lm.get(files[0].stem, s_lm.get(files[0].name))
-            if s_lm is None:
-                raise InputError(f"scan landmarks {s_path}: expected an entry for {files[0].stem}, found none")
-        if len(t_lm) != (len(s_lm) if not isinstance(s_lm, dict) else len(t_lm)):
-            raise InputError(f"scan landmarks {s_path} and template landmarks {t_path}: expected the same number "
-                             f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
-        check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
+    t_lm, s_lm, det, auto = _landmark_inputs(landmarks, detector, src, files, T_V)
     ident, expr = _bases(Path(template), T_V, T_F, identity_basis, expression_basis, log)
     reg = Registration(T_V, T_F, options, t_lm, name=str(template), identity=ident, expressions=expr,
                        detector=det)

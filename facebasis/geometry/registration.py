@@ -1,19 +1,24 @@
 """Registration of 3D face scans (any topology) to a template: meshes in the template's topology.
 
 Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else a search over
-candidate orientations plus trimmed ICP with scale), then non-rigid ICP with a stiffness schedule
+candidate orientations plus trimmed ICP with scale); with a shape model (:mod:`.shapemodel`) a fit
+in it first: a neutral scan within the template's identity space, an expression scan as the
+person's registered neutral plus the template's expressions transferred to the person (weights
+bounded); then non-rigid ICP with a stiffness schedule
 (:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term: local
 similarities from the template, since two faces differ in local size; local rotations from a
 person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
 person, same scanner). The work happens in the start mesh's frame and units; the result is mapped
-back onto the scan.
+back onto the scan. Landmarks may be given (indices or points) or found on the scan
+(``"auto"``, :mod:`.scanlandmarks`).
 
 :class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
 landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
 person's expressions, register the neutral scan first, then each expression with
 ``start=<registered neutral>``: every expression then starts from the person's own neutral, so a
 vertex index means the same point of the face across the set. :func:`register_files` does this
-for files and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per scan, atomically.
+for files (:mod:`.registerfiles`) and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per
+scan, atomically.
 
 References
 ----------

@@ -25,6 +25,11 @@ from ..errors import InputError
 INNER = np.arange(17, 68)
 #: framings tried on the template (the template's x-y extent as a fraction of the image), in order
 FILLS = (0.5, 0.7, 0.9, 0.35)
+#: the render's background, also seen through the scan's holes (eyes, mouth): dark, as an open mouth is
+BACKGROUND = (0, 0, 0)
+#: the render smooths a mesh over about this many pixels (a noisy scan's small triangles, flat-shaded,
+#: are speckle a detector does not take for a face; a mesh coarser than that is not smoothed)
+SMOOTH_PIXELS = 2.0
 
 
 @dataclass(frozen=True)
@@ -90,6 +95,24 @@ def lift(points: np.ndarray, P: np.ndarray, V: np.ndarray, F: np.ndarray) -> tup
     return X, np.isfinite(X[:, 0])
 
 
+def smoothed(V: np.ndarray, F: np.ndarray, iterations: int) -> np.ndarray:
+    """``V`` after a few steps of uniform Laplacian smoothing (``x <- mean of the neighbours``), for
+    the render only: flat shading of a noisy scan's small triangles is speckle a detector does not
+    take for a face (the lift still uses the scan's own surface)."""
+    import scipy.sparse as sp
+
+    i = F[:, [0, 1, 2, 1, 2, 0]].ravel()
+    j = F[:, [1, 2, 0, 0, 1, 2]].ravel()
+    A = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(len(V), len(V)))
+    A.data[:] = 1.0  # duplicate edges counted once
+    deg = np.asarray(A.sum(1)).ravel()
+    W = sp.diags(1.0 / np.maximum(deg, 1)) @ A
+    X = np.asarray(V, float)
+    for _ in range(iterations):  # a loop over smoothing steps, not vertices
+        X = np.where(deg[:, None] > 0, W @ X, X)
+    return X
+
+
 def detect_on_mesh(V: np.ndarray, F: np.ndarray, view: FrontView, detector) -> tuple[np.ndarray, np.ndarray]:
     """68 landmarks of a mesh in the template's frame: render, detect, lift.
 
@@ -100,7 +123,11 @@ def detect_on_mesh(V: np.ndarray, F: np.ndarray, view: FrontView, detector) -> t
     from .raster import rasterize_mesh
 
     P = view.pixels(V)
-    img = rasterize_mesh(P, F, (view.size, view.size))
+    from .mesh import median_edge_length
+
+    # smoothing over about SMOOTH_PIXELS pixels: k uniform Laplacian steps spread over ~ h sqrt(k)
+    k = int(min(20, (SMOOTH_PIXELS / view.scale / max(median_edge_length(V, F), 1e-12)) ** 2))
+    img = rasterize_mesh(view.pixels(smoothed(V, F, k)), F, (view.size, view.size), background=BACKGROUND)
     pts = detector.detect(img)
     if pts is None:
         return np.full((68, 3), np.nan), np.zeros(68, bool)

@@ -17,7 +17,15 @@ def cmd_register(args) -> int:
     lm = args.landmarks
     if lm is not None and not (lm == ["auto"] or (len(lm) == 2 and "auto" not in lm)):
         raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {' '.join(lm)}")
-    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=args.detector,
+    det = None
+    if args.detector is not None and lm != ["auto"]:
+        raise InputError(f"--detector {args.detector}: expected together with --landmarks auto, found "
+                         f"{'no --landmarks' if lm is None else '--landmarks with files'}")
+    if lm == ["auto"]:
+        from ..capture.detect import available_detector, get_detector
+
+        det = get_detector(args.detector or available_detector(), video=False)
+    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")

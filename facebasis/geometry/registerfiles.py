@@ -101,15 +101,14 @@ def _landmark_inputs(landmarks, detector, src: Path, files: list, T_V):
     t_lm = s_lm = det = None
     auto = isinstance(landmarks, str) or (isinstance(landmarks, (list, tuple)) and list(landmarks) == ["auto"])
     if detector is not None and not auto:
-        raise InputError(f"--detector {detector}: expected together with --landmarks auto, found "
-                         f"{'no --landmarks' if landmarks is None else '--landmarks with files'}")
+        raise InputError(f"detector: expected together with landmarks 'auto', found "
+                         f"{'no landmarks' if landmarks is None else 'landmark files'}")
     if auto:
-        from ..capture.detect import available_detector, get_detector
-
         if str(landmarks if isinstance(landmarks, str) else landmarks[0]) != "auto":
             raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {landmarks!r}")
-        det = get_detector(detector or available_detector(), video=False)
-        s_lm = "auto"
+        if detector is None:
+            raise InputError("--landmarks auto: expected a 2D face detector (--detector), found none")
+        det, s_lm = detector, "auto"
     elif landmarks is not None:
         s_path, t_path = landmarks
         t_lm = read_landmarks(t_path)
@@ -132,7 +131,7 @@ def _landmark_inputs(landmarks, detector, src: Path, files: list, T_V):
 
 def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
                    options: RegistrationOptions | None = None, log=None, identity_basis=None,
-                   expression_basis=None, detector: str | None = None, expression_transfer: str = "deformation") -> dict:
+                   expression_basis=None, detector=None, expression_transfer: str = "deformation") -> dict:
     """Register a scan, or a folder of one person's scans, and write the results to ``out``.
 
     Parameters
@@ -146,7 +145,8 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
     landmarks : ``(SCAN_LM.json, TEMPLATE_LM.json)`` or None; for a folder, SCAN_LM.json maps scan
         stems to landmark lists (scans it does not name get none); or ``"auto"``: found on every scan
         and on the template by a 2D detector on front renders (:mod:`.scanlandmarks`)
-    detector : with ``"auto"``: ``"dlib"`` or ``"mediapipe"`` (default: the installed one)
+    detector : with ``"auto"``: a 2D face detector object with ``detect(image) -> (68, 2) | None``
+        (:func:`facebasis.capture.detect.get_detector`; the command line makes it from ``--detector``)
     expression_transfer : how the expression basis is carried to the person's registered neutral:
         ``"deformation"`` (deformation transfer) or ``"linear"`` (the template's displacements, as
         ICT-FaceKit defines its expressions: identity-independent deltas)

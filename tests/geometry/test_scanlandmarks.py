@@ -104,3 +104,17 @@ def test_cli_detector_option_once_and_known(tmp_path, capsys, args):
     with pytest.raises(SystemExit) as e:
         main(["register", "s.obj", "--template", "t.obj", "--out", str(tmp_path / "o")] + args)
     assert e.value.code == 2 and args[0] in capsys.readouterr().err
+
+
+def test_register_files_auto_needs_a_detector_and_a_detector_needs_auto(tmp_path):
+    from facebasis.defaults.face import default_template
+    from facebasis.errors import InputError
+    from facebasis.geometry.registerfiles import register_files
+
+    rig = default_template()
+    write_mesh(tmp_path / "t.obj", rig.neutral, rig.faces)
+    with pytest.raises(InputError, match=r"--landmarks auto: expected a 2D face detector \(--detector\), found none"):
+        register_files(tmp_path / "t.obj", tmp_path / "t.obj", tmp_path / "o", landmarks="auto")
+    with pytest.raises(InputError, match="detector: expected together with landmarks 'auto', found no landmarks"):
+        register_files(tmp_path / "t.obj", tmp_path / "t.obj", tmp_path / "o", detector=object())
+    assert not (tmp_path / "o").exists()

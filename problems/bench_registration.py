@@ -23,7 +23,9 @@ delta; with and without the 68 landmarks (given as 3D points on the scan, the tr
 positions plus the same noise). For expressions also how much of the motion a closest-point term can
 see (:func:`motion_visibility`). Timed per scan: wall and CPU seconds, load average.
 With ``--rig M`` a rig is generated from M registered training scans and from the exact examples
-and their held-out reproduction errors compared (:func:`rig_comparison`).
+and their held-out reproduction errors compared (:func:`rig_comparison`). This benchmark runs
+without identity or expression bases; with them (issue #27) see
+:mod:`problems.bench_registration_rig`.
 """
 
 from __future__ import annotations

@@ -1,19 +1,33 @@
 """Command-line command of scan registration: register.
 
 ``register(subparsers)`` adds it to the ``facebasis`` command; the handler only parses, calls
-:func:`facebasis.geometry.registration.register_files` and prints.
+:func:`facebasis.geometry.registerfiles.register_files` and prints.
 """
 
 from __future__ import annotations
 
+from ..errors import InputError
 from .common import Once
 from .outputs import Outputs
 
 
 def cmd_register(args) -> int:
-    from ..geometry.registration import register_files
+    from ..geometry.registerfiles import register_files
 
-    s = register_files(args.scans, args.template, args.out, args.landmarks, args.neutral, log=print)
+    lm = args.landmarks
+    if lm is not None and not (lm == ["auto"] or (len(lm) == 2 and "auto" not in lm)):
+        raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {' '.join(lm)}")
+    det = None
+    if args.detector is not None and lm != ["auto"]:
+        raise InputError(f"--detector {args.detector}: expected together with --landmarks auto, found "
+                         f"{'no --landmarks' if lm is None else '--landmarks with files'}")
+    if lm == ["auto"]:
+        from ..capture.detect import available_detector, get_detector
+
+        det = get_detector(args.detector or available_detector(), video=False)
+    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=det,
+                       identity_basis=args.identity_basis, expression_basis=args.expression_basis,
+                       expression_transfer=args.expression_transfer)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
 
@@ -30,10 +44,27 @@ def register(subparsers) -> None:
     p.add_argument("scans", metavar="SCAN_OR_DIR", help="scan (.obj/.ply, any topology) or folder of one person's scans")
     p.add_argument("--template", required=True, metavar="TEMPLATE_NEUTRAL.obj", help="template neutral mesh")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--landmarks", nargs=2, default=None, action=Once, metavar=("SCAN_LM.json", "TEMPLATE_LM.json"),
+    p.add_argument("--landmarks", nargs="+", default=None, action=Once, metavar="auto | SCAN_LM.json TEMPLATE_LM.json",
                    help="scan landmarks (vertex indices or [x, y, z] points; for a folder an object mapping scan "
-                        "names to such lists) and the template's landmark vertex indices, in the same order")
+                        "names to such lists) and the template's landmark vertex indices, in the same order; or "
+                        "'auto': found on each scan and on the template by a face detector on a front render "
+                        "(the template looks along +z, y up), lifted onto the surface; the number found and their "
+                        "residual are reported per scan")
+    p.add_argument("--expression-transfer", default="deformation", action=Once, choices=("deformation", "linear"),
+                   help="how the expression basis is carried onto the person's registered neutral: deformation "
+                        "transfer (default) or the template's displacements as they are (ICT-FaceKit's own convention)")
+    p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
+                   help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",
                    help="the neutral scan's file name or stem inside the folder (default: neutral)")
+    p.add_argument("--identity-basis", default=None, action=Once, metavar="DIR",
+                   help="folder of identity meshes in the template's topology (e.g. ICT-FaceKit's identity*.obj): the "
+                        "neutral scan is fitted in their space first, then refined non-rigidly; default: identity*.obj "
+                        "beside the template if any; 'none' to register without")
+    p.add_argument("--expression-basis", default=None, action=Once, metavar="DIR",
+                   help="folder of the template's expressions in its topology: each other scan is fitted as the "
+                        "registered neutral plus their transfer (weights in [0, 1.5]) first; default: the other meshes "
+                        "of the template's vertex count beside identity*.obj; 'none' to register without")
     p.set_defaults(func=cmd_register, outputs=Outputs(writes=(("out", "folder", "--out"),),
-                                                     reads=("scans", "template", "landmarks")))
+                                                     reads=("scans", "template", "landmarks", "identity_basis",
+                                                            "expression_basis")))

@@ -21,7 +21,10 @@ rig         the :class:`Rig` type, rig folders
 gltf        a rig as glTF 2.0 (.glb/.gltf, metres, normals, UVs, materials) with one morph target per shape
 rigid       similarity alignment of a template to a scan (landmarks, or orientation search + trimmed ICP)
 nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closest points on a scan
-registration  scans of any topology to meshes in the template's topology (rigid + non-rigid ICP)
+registration  scans of any topology to meshes in the template's topology (rigid + model fit + non-rigid ICP)
+registerfiles  registering scan files: inputs checked before any work, outputs written atomically
+shapemodel  identity and expression bases: fitting a scan in a linear shape space (pose + bounded coefficients)
+scanlandmarks  landmarks found on a scan: front render, a 2D detector object, ray lift onto the surface
 raster      flat-shaded numpy rasterisation of a mesh into an image (preview videos; no OpenGL)
 
 References

@@ -1,19 +1,24 @@
 """Registration of 3D face scans (any topology) to a template: meshes in the template's topology.
 
 Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else a search over
-candidate orientations plus trimmed ICP with scale), then non-rigid ICP with a stiffness schedule
+candidate orientations plus trimmed ICP with scale); with a shape model (:mod:`.shapemodel`) a fit
+in it first: a neutral scan within the template's identity space, an expression scan as the
+person's registered neutral plus the template's expressions transferred to the person (weights
+bounded); then non-rigid ICP with a stiffness schedule
 (:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term: local
 similarities from the template, since two faces differ in local size; local rotations from a
 person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
 person, same scanner). The work happens in the start mesh's frame and units; the result is mapped
-back onto the scan.
+back onto the scan. Landmarks may be given (indices or points) or found on the scan
+(``"auto"``, :mod:`.scanlandmarks`).
 
 :class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
 landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
 person's expressions, register the neutral scan first, then each expression with
 ``start=<registered neutral>``: every expression then starts from the person's own neutral, so a
 vertex index means the same point of the face across the set. :func:`register_files` does this
-for files and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per scan, atomically.
+for files (:mod:`.registerfiles`) and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per
+scan, atomically.
 
 References
 ----------
@@ -32,10 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, MeshError
-from ..jsonio import read_json
-from .mesh import median_edge_length, validate_mesh
+from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
+from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 
 #: A scan whose size (bounding-box diagonal) differs from the template's by more than this factor
 #: (either way) is refused as being in other units.
@@ -54,12 +59,27 @@ class RegistrationOptions:
     nricp_from_start : the same from a given start mesh (the person's registered neutral: local
         rotations, as skin moving over the same face stretches little)
     unit_ratio : refuse scans whose size differs from the template's by more than this factor
+    identity_fit : the identity-space fit of a neutral scan (:mod:`.shapemodel`), when the template
+        has an identity basis
+    expression_fit : the expression fit of an expression scan, when expressions are given
+    nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
+    auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
+        non-rigid stage's landmark weights
+    expression_max : upper bound of the expression weights (lower bound 0). Above 1: a person's
+        expression may be stronger than the template's (ICT person of ``problems.generation``, its
+        jawOpen 1.4 x the template's: p95 0.57 cm with weights in [0, 1], 0.21 cm in [0, 1.5])
     """
 
     rigid: RigidOptions = field(default_factory=RigidOptions)
     nricp: NricpOptions = field(default_factory=lambda: NricpOptions(local_scale=True))
     nricp_from_start: NricpOptions = field(default_factory=NricpOptions)
     unit_ratio: float = UNIT_RATIO
+    identity_fit: ModelFitOptions = field(default_factory=ModelFitOptions)
+    expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4,
+                                                                                    prior_start=1e-2))
+    nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
+    expression_max: float = 1.5
+    auto_landmark_weight: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -76,6 +96,11 @@ class RegistrationResult:
     rigid_score : trimmed symmetric RMS of the rigid stage (template units)
     landmark_error : (k,) distance of each registered landmark vertex to its scan landmark, or None
     seconds : wall time
+    model : the identity or expression fit before the non-rigid stage (None without a basis)
+    model_kind : ``"identity"``, ``"expressions"`` or None
+    model_names : the basis meshes' names (for the report)
+    landmarks_found : with landmarks found on the scan (``"auto"``): (found on both the scan and the
+        template, used: within 2 edge lengths of the mesh before the non-rigid stage); None otherwise
     """
 
     vertices: np.ndarray
@@ -86,6 +111,10 @@ class RegistrationResult:
     rigid_score: float
     landmark_error: np.ndarray | None
     seconds: float
+    model: ModelFit | None = None
+    model_kind: str | None = None
+    model_names: tuple = ()
+    landmarks_found: tuple | None = None
 
     def report(self) -> dict:
         """Summary as plain JSON types (distances in scan units)."""
@@ -98,12 +127,23 @@ class RegistrationResult:
             "residual": stats(d),
             "residual_note": "distance of the vertices that found scan surface to the scan, scan units",
             "iterations": int(self.iterations),
-            "landmark_error": None if lm is None else {"mean": float(lm.mean()), "max": float(lm.max())},
+            "landmark_error": None if lm is None or not len(lm) else {"mean": float(lm.mean()), "max": float(lm.max())},
+            **({} if self.landmarks_found is None else {"landmarks_found": int(self.landmarks_found[0]),
+                                                          "landmarks_used": int(self.landmarks_found[1])}),
             "no_surface_vertices": int(self.no_surface.sum()),
             "no_surface_fraction": float(self.no_surface.mean()),
             "rigid": {**self.similarity.as_dict(), "trimmed_rms_template_units": float(self.rigid_score)},
             "seconds": float(self.seconds),
+            **({} if self.model is None else {self.model_kind: self._model_report()}),
         }
+
+    def _model_report(self) -> dict:
+        m = self.model
+        c = {str(k): float(v) for k, v in zip(self.model_names, m.coefficients)}
+        if self.model_kind == "expressions":
+            c = {k: v for k, v in c.items() if v > 1e-4}
+        return {"coefficients": c, "rms_point_to_plane_template_units": float(m.rms), "pairs": int(m.pairs),
+                "iterations": int(m.iterations)}
 
 
 def _bbox_diagonal(V: np.ndarray) -> float:
@@ -151,24 +191,6 @@ def check_landmarks(template_landmarks, scan_landmarks, n_template: int, n_scan:
     return t, s
 
 
-def read_landmarks(path: str | os.PathLike):
-    """Read a landmark JSON file: a list of vertex indices or of [x, y, z] points, or an object
-    ``{"landmarks": [...]}``, or (scan landmarks of a folder) an object mapping scan stems to lists."""
-    path = Path(path)
-    data = read_json(path, "a JSON list of vertex indices or [x, y, z] points", what="landmarks")
-    if isinstance(data, dict) and "landmarks" in data:
-        data = data["landmarks"]
-    if isinstance(data, dict):
-        return {str(k): v for k, v in data.items()}
-    if not isinstance(data, list):
-        raise InputError(f"landmarks {path}: expected a list of indices or points, found {type(data).__name__}")
-    try:
-        return np.asarray(data, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"landmarks {path}: expected a list of indices or [x, y, z] points, found ragged or "
-                         f"non-numeric entries") from exc
-
-
 class Registration:
     """A template prepared for registering many scans.
 
@@ -178,9 +200,20 @@ class Registration:
     options : :class:`RegistrationOptions`
     landmarks : (k,) template vertex indices used when scan landmarks are given
     name : the template's name in messages
+    identity : identity basis (:class:`.shapemodel.ShapeBasis`): a scan registered from the template
+        is fitted in its space first
+    expressions : the template's expressions (:meth:`person_expressions` carries them to a person)
+    detector : a 2D face detector (:func:`facebasis.capture.detect.get_detector`): enables
+        ``scan_landmarks="auto"`` (:mod:`.scanlandmarks`); the template's own are found here
+
+    Raises
+    ------
+    InputError
+        A basis of another shape; with a detector, no face on the template's front render.
     """
 
-    def __init__(self, V, F, options: RegistrationOptions | None = None, landmarks=None, name: str = "template"):
+    def __init__(self, V, F, options: RegistrationOptions | None = None, landmarks=None, name: str = "template",
+                 identity: ShapeBasis | None = None, expressions: ShapeBasis | None = None, detector=None):
         self.V, self.F = validate_mesh(V, F, name, check_degenerate=False)
         self.name = name
         self.options = options or RegistrationOptions()
@@ -190,6 +223,50 @@ class Registration:
         self.h = median_edge_length(self.V, self.F)
         self.diagonal = _bbox_diagonal(self.V)
         self.nricp = NonRigidICP(self.F, len(self.V))
+        # a template of several parts (ICT-FaceKit's full head: skin, eyeballs, teeth, gums, ...): the
+        # skin (the largest part) meets the scan; the other parts follow the model fit (or stay rigid)
+        labels = connected_components(self.F, len(self.V))
+        count = np.bincount(labels)
+        self.skin = np.flatnonzero(labels == np.argmax(count)) if len(count) > 1 else None
+        for basis, what in ((identity, "identity basis"), (expressions, "expression basis")):
+            if basis is not None and basis.deltas.shape[1:] != self.V.shape:
+                raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
+                                 f"{name}, found {basis.deltas.shape}")
+        self.identity, self.expressions = identity, expressions
+        self.auto = None
+        if detector is not None:  # landmarks found on scans: the template's own, found once
+            from .scanlandmarks import AutoLandmarks
+
+            self.auto = AutoLandmarks(self.V, self.F, detector, name)
+
+    def person_expressions(self, neutral: np.ndarray, transfer: str = "deformation") -> np.ndarray:
+        """The template's expressions carried onto a person's registered neutral, in its frame.
+
+        Parameters
+        ----------
+        neutral : (n, 3) the person's registered neutral (any frame: the template -> neutral
+            similarity is fitted on all vertices, Umeyama 1991)
+        transfer : ``"deformation"`` (deformation transfer, Sumner & Popovic 2004, in the template's
+            frame: the person's own jaw opens) or ``"linear"`` (the template's displacements, rotated
+            and scaled)
+
+        Returns
+        -------
+        (K, n, 3) displacements in ``neutral``'s frame
+        """
+        if self.expressions is None:
+            raise InputError(f"{self.name}: expressions requested but the template has no expression basis")
+        g = umeyama(self.V, neutral)
+        D = self.expressions.deltas
+        if transfer == "deformation":
+            from .rig import Rig
+            from .transfer import deformation_transfer
+
+            rig = Rig(self.V, self.F, tuple(self.expressions.names), D, source="expression basis")
+            D = deformation_transfer(rig, g.inverse().apply(neutral)).deltas
+        elif transfer != "linear":
+            raise InputError(f"transfer: expected 'deformation' or 'linear', found {transfer!r}")
+        return g.scale * (D @ g.rotation.T)
 
     def check_scan(self, V, F, name: str = "scan", scan_landmarks=None):
         """Validate a scan (and its landmarks) before any work; returns ``(V, F, scan landmarks)``."""
@@ -215,27 +292,38 @@ class Registration:
         return V, F, lm
 
     def register(self, V, F, scan_landmarks=None, start: np.ndarray | None = None,
-                 name: str = "scan") -> RegistrationResult:
+                 name: str = "scan", expressions: np.ndarray | None = None) -> RegistrationResult:
         """Register one scan.
 
         Parameters
         ----------
         V : (N, 3) scan vertices, F : (M, 3) scan triangles (any topology, holes allowed)
-        scan_landmarks : (k,) scan vertex indices or (k, 3) points, matching the template landmarks
+        scan_landmarks : (k,) scan vertex indices or (k, 3) points, matching the template landmarks,
+            or ``"auto"``: found on the scan (needs a ``detector``), after the rigid stage
         start : (n, 3) start mesh in the template's topology (e.g. the person's registered neutral,
-            in any frame); default the template neutral
+            in any frame); default the template neutral (then fitted in the identity basis first,
+            if the template has one)
         name : the scan's name in messages
+        expressions : (K, n, 3) expression displacements in ``start``'s frame
+            (:meth:`person_expressions`): the scan is first fitted as ``start`` plus a combination of
+            them, weights in [0, 1]
 
         Returns
         -------
         RegistrationResult
         """
-        V, F, lm_pts = self.check_scan(V, F, name, scan_landmarks)
+        auto = isinstance(scan_landmarks, str) and scan_landmarks == "auto"
+        if auto and self.auto is None:
+            raise InputError(f"{name}: landmarks 'auto' need a detector (Registration(..., detector=...))")
+        V, F, lm_pts = self.check_scan(V, F, name, None if auto else scan_landmarks)
         P = self.V
         if start is not None:
             P = validate_mesh(start, self.F, f"{name}: start mesh", check_degenerate=False)[0]
             if len(P) != len(self.V):
                 raise InputError(f"{name}: start mesh: expected {len(self.V)} vertices, found {len(P)}")
+        if expressions is not None and (start is None or np.shape(expressions)[1:] != P.shape):
+            raise InputError(f"{name}: expressions: expected (K, {len(P)}, 3) displacements of a start mesh, found "
+                             f"{np.shape(expressions)}{'' if start is not None else ' without a start mesh'}")
         t0 = time.perf_counter()
         # rigid stage: in the scan's frame
         # from the person's registered neutral (same scanner, same units): a rigid motion, no scale
@@ -243,21 +331,67 @@ class Registration:
         guess = umeyama(P[self.landmarks], lm_pts, scale=rigid.scale) if lm_pts is not None else None
         sim, score = align_similarity(P, self.F, V, F, rigid, start=guess)
         surface = ScanSurface(V, F)
-        rng = np.random.default_rng(rigid.seed)
-        sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
-        sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations, rigid.keep_template,
-                                           scale=rigid.scale)
+        with_model = (start is None and self.identity is not None) or expressions is not None
+        if not with_model:  # (a model fit refines the pose itself, with the shape)
+            rng = np.random.default_rng(rigid.seed)
+            sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
+            sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations,
+                                               rigid.keep_template, scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
         inv = sim.inverse()
         surface_t = surface.moved(inv.apply(V))
         lm_t = inv.apply(lm_pts) if lm_pts is not None else None
+        lm_idx = self.landmarks if lm_pts is not None else None
         opts = self.options.nricp if start is None else self.options.nricp_from_start
-        res = self.nricp.fit(P, surface_t, opts, self.landmarks if lm_pts is not None else None,
-                             lm_t, h=median_edge_length(P, self.F))
-        X = sim.apply(res.vertices)
-        lm_err = np.linalg.norm(X[self.landmarks] - lm_pts, axis=1) if lm_pts is not None else None
+        h = median_edge_length(P, self.F)
+        model, kind, names = self._fit_model(P, surface_t, h, start is None, expressions)
+        if model is not None:
+            P, opts = model.vertices, self.options.nricp_after_model
+            h = median_edge_length(P, self.F)
+        if auto:
+            lm_idx, lm_t, found = self._auto_landmarks(P, surface_t, F, h, start is not None)
+            lm_pts = sim.apply(lm_t) if lm_t is not None else None
+        if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
+            opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
+                                                                   for w in opts.landmark_weight))
+        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h)
+        Xt = res.vertices
+        if self.skin is not None:  # the other parts have no scan surface: keep them where the fit put them
+            Xt = P.copy()
+            Xt[self.skin] = res.vertices[self.skin]
+        X = sim.apply(Xt)
+        lm_err = np.linalg.norm(X[lm_idx] - lm_pts, axis=1) if lm_pts is not None else None
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
-                                  lm_err, time.perf_counter() - t0)
+                                  lm_err, time.perf_counter() - t0, model, kind, names,
+                                  (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
+
+    def _auto_landmarks(self, P, surface_t, F, h, from_start: bool):
+        """Landmarks found on the scan (:mod:`.scanlandmarks`), seen from the template's front, as
+        ``(template indices, points in P's frame)`` or ``(None, None)``. Pairs farther than 2 ``h``
+        from the current mesh ``P`` (after the rigid stage and any model fit) are dropped: a detection
+        lifted into a hole or a socket, or a detector that places a point differently on two faces
+        (on untextured renders of two ICT persons in their true pose: 1.2 cm apart on average)."""
+        g = umeyama(self.V, P) if from_start else Similarity()  # P's frame -> the template's: g^-1
+        idx, pts = self.auto.on_scan(g.inverse().apply(surface_t.V), F)
+        pts = g.apply(pts)
+        ok = np.linalg.norm(P[idx] - pts, axis=1) <= 2.0 * h
+        return (idx[ok], pts[ok], len(idx)) if ok.sum() >= 3 else (None, None, len(idx))
+
+    def _fit_model(self, P, surface_t, h, from_template: bool, expressions):
+        """The identity fit (from the template, with a basis) or the expression fit (with
+        ``expressions``) of :mod:`.shapemodel`; ``(None, None, ())`` otherwise."""
+        normals = self.nricp.vertex_normals
+        if from_template and self.identity is not None:
+            fit = fit_shape_model(P, self.identity.deltas, surface_t, normals, h, self.options.identity_fit,
+                                  use=self.skin)
+            return fit, "identity", tuple(self.identity.names)
+        if expressions is not None:
+            fit = fit_shape_model(P, np.asarray(expressions, float), surface_t, normals, h, self.options.expression_fit,
+                                  bounds=(0.0, self.options.expression_max), use=self.skin)
+            names = tuple(self.expressions.names) if self.expressions is not None and \
+                len(self.expressions.names) == len(expressions) else tuple(f"e{k}" for k in range(len(expressions)))
+            return fit, "expressions", names
+        return None, None, ()
 
 
 def _nice_scale(x: float) -> float:
@@ -273,129 +407,15 @@ def register_scan(template_V, template_F, scan_V, scan_F, options: RegistrationO
         scan_V, scan_F, scan_landmarks, start)
 
 
-#: the run's own file in the output folder: a scan of this stem would have its report overwritten
-SUMMARY_STEM = "summary"
+def register_files(*args, **kwargs) -> dict:
+    """Register scan files and write the results (:func:`.registerfiles.register_files`)."""
+    from .registerfiles import register_files as _register_files
+
+    return _register_files(*args, **kwargs)
 
 
-def _scan_files(scan_or_dir: Path) -> list[Path]:
-    from .meshio import MESH_SUFFIXES
+def read_landmarks(path):
+    """Read a landmark JSON file (:func:`.registerfiles.read_landmarks`)."""
+    from .registerfiles import read_landmarks as _read_landmarks
 
-    if scan_or_dir.is_dir():
-        named = sorted(p for p in scan_or_dir.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
-        broken = [p for p in named if p.is_symlink() and not p.exists()]
-        if broken:
-            raise InputError(f"scans {scan_or_dir}: expected readable scan files, found symbolic link(s) leading nowhere: "
-                             + ", ".join(f"{p.name} -> {os.readlink(p)}" for p in broken[:3]))
-        files = [p for p in named if p.is_file()]
-        if not files:
-            raise InputError(f"scans {scan_or_dir}: expected .obj or .ply files in the folder, found none")
-        stems = [p.stem for p in files]
-        dup = sorted({s for s in stems if stems.count(s) > 1})
-        if dup:
-            raise InputError(f"scans {scan_or_dir}: expected one file per name, found {dup[0]} twice (.obj and .ply)")
-    elif not scan_or_dir.exists():
-        raise InputError(f"scans {scan_or_dir}: expected a scan file or a folder of scans, found no such path")
-    else:
-        files = [scan_or_dir]
-    clash = [p for p in files if p.stem.casefold() == SUMMARY_STEM]
-    if clash:
-        raise InputError(f"scans {scan_or_dir}: expected scan names other than '{SUMMARY_STEM}' (the run writes "
-                         f"{SUMMARY_STEM}.json, which would overwrite the report {clash[0].stem}.json of this scan), "
-                         f"found {clash[0].name}; rename the scan")
-    return files
-
-
-def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | None = None,
-                   options: RegistrationOptions | None = None, log=None) -> dict:
-    """Register a scan, or a folder of one person's scans, and write the results to ``out``.
-
-    Parameters
-    ----------
-    scan_or_dir : an OBJ/PLY scan, or a folder of them; in a folder the scan named ``neutral``
-        (``neutral.obj``/``.ply``, or ``neutral``'s stem) is registered first from the template and
-        the others from the registered neutral
-    template : the template neutral (OBJ/PLY)
-    out : output folder: ``<stem>.obj`` (template topology) and ``<stem>.json`` (report) per scan,
-        and ``summary.json``; written atomically (all or nothing)
-    landmarks : ``(SCAN_LM.json, TEMPLATE_LM.json)`` or None; for a folder, SCAN_LM.json maps scan
-        stems to landmark lists (scans it does not name get none)
-    neutral : the neutral scan's file name or stem in a folder (default ``neutral``)
-
-    Every input is read and checked before any registration starts.
-
-    Returns
-    -------
-    summary : dict with one report per scan, in registration order
-    """
-    from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
-    from .meshio import read_mesh, write_mesh
-    from .objlayout import copy_side_files, read_obj_layout
-
-    log = log or (lambda *a: None)
-    src = Path(scan_or_dir)
-    files = _scan_files(src)
-    T_V, T_F = read_mesh(template)
-    layout = read_obj_layout(template)  # UVs, materials, polygons of an OBJ template, kept in the outputs
-    t_lm = s_lm = None
-    if landmarks is not None:
-        s_path, t_path = landmarks
-        t_lm = read_landmarks(t_path)
-        if isinstance(t_lm, dict):
-            raise InputError(f"template landmarks {t_path}: expected a list of template vertex indices, found an object")
-        s_lm = read_landmarks(s_path)
-        if src.is_dir() and not isinstance(s_lm, dict):
-            raise InputError(f"scan landmarks {s_path}: expected an object mapping scan names to landmark lists "
-                             f"when registering a folder, found a list")
-        if not src.is_dir() and isinstance(s_lm, dict):
-            s_lm = s_lm.get(files[0].stem, s_lm.get(files[0].name))
-            if s_lm is None:
-                raise InputError(f"scan landmarks {s_path}: expected an entry for {files[0].stem}, found none")
-        if len(t_lm) != (len(s_lm) if not isinstance(s_lm, dict) else len(t_lm)):
-            raise InputError(f"scan landmarks {s_path} and template landmarks {t_path}: expected the same number "
-                             f"of landmarks, found {len(s_lm)} and {len(t_lm)}")
-        check_landmarks(t_lm, None, len(T_V), None, f"template landmarks {t_path}")
-    reg = Registration(T_V, T_F, options, t_lm, name=str(template))
-    order = files
-    if src.is_dir() and len(files) > 1:
-        want = neutral or "neutral"
-        hit = [p for p in files if p.name == want or p.stem == want]
-        if not hit:
-            raise InputError(f"scans {src}: expected a neutral scan named '{want}' (.obj/.ply) to register first, "
-                             f"found {', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}; "
-                             "name it with --neutral")
-        order = hit + [p for p in files if p is not hit[0]]
-    elif neutral is not None and not src.is_dir():
-        raise InputError(f"--neutral {neutral}: expected a folder of scans, found the single file {src}")
-    scans = []
-    for p in order:  # read and check every scan before any work
-        V, F = read_mesh(p)
-        lm = s_lm.get(p.stem, s_lm.get(p.name)) if isinstance(s_lm, dict) else s_lm
-        if lm is not None:
-            if len(lm) != len(t_lm):
-                raise InputError(f"scan landmarks for {p.name} and template landmarks: expected the same number of "
-                                 f"landmarks, found {len(lm)} and {len(t_lm)}")
-        V, F, _ = reg.check_scan(V, F, str(p), lm)
-        scans.append((p, V, F, lm))
-    summary = {"template": str(template), "scans": []}
-    with atomic_directory(out) as stage:
-        start = None
-        for k, (p, V, F, lm) in enumerate(scans):
-            res = reg.register(V, F, lm, start=start, name=str(p))
-            if k == 0 and len(scans) > 1:
-                start = res.vertices
-            if layout is not None and layout.matches(len(res.vertices), reg.F):
-                atomic_write_bytes(stage / f"{p.stem}.obj", layout.obj_bytes(res.vertices))
-            else:
-                write_mesh(stage / f"{p.stem}.obj", res.vertices, reg.F)
-            rep = {"scan": str(p), "scan_vertices": int(len(V)), "template": str(template),
-                   "started_from": "template" if (k == 0 or len(scans) == 1) else f"{scans[0][0].stem}.obj",
-                   **res.report()}
-            atomic_write_json(stage / f"{p.stem}.json", rep)
-            summary["scans"].append(rep)
-            r = rep["residual"] or {}
-            log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
-                f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
-                f"{rep['iterations']} iterations, {rep['seconds']:.1f} s")
-        copy_side_files(layout, stage)
-        atomic_write_json(stage / "summary.json", summary)
-    return summary
+    return _read_landmarks(path)

@@ -1,0 +1,273 @@
+"""Linear shape models in the template's topology as registration priors: identity and expression bases.
+
+A *shape basis* is a set of meshes in the template's topology (same vertex count and triangles),
+each read as a displacement of the template: ``D_k = mesh_k - template``. Two uses:
+
+* **identity** (ICT-FaceKit's ``FaceXModel/identity*.obj``, or any folder of such meshes): a neutral
+  scan is first fitted as ``s R (T + sum_k c_k D_k) + t``, coefficients ``c`` with a Gaussian prior
+  (each basis mesh taken as one standard deviation of its mode, as ICT's are: ``c ~ N(0, I)``);
+* **expressions** (the template's blendshapes, transferred to the person): an expression scan is
+  first fitted as ``R (B_0 + sum_k w_k E_k) + t`` with ``B_0`` the person's registered neutral and
+  weights bounded to ``[0, 1]``.
+
+Either fit alternates closest points on the scan with one Gauss-Newton step of the point-to-plane
+energy in the pose and the coefficients together (Chen & Medioni 1992 for the point-to-plane term;
+the pose linearised as in :func:`.rigid.refine_point_to_plane`),
+
+    E(c, pose) = (1/p) sum_i (n_i . (x_i(c, pose) - q_i))^2 + mu h^2 sum_k (c_k / sigma_k)^2,
+
+``q_i, n_i`` the closest scan point and its normal, ``h`` the template's median edge length (so
+``mu`` is unit-free). A step is a bounded linear least squares (:func:`scipy.optimize.lsq_linear`,
+bounds on the coefficients only), i.e. the exact minimiser of the linearised energy inside the
+bounds. The non-rigid stage (:mod:`.nricp`) then starts from the fitted mesh and takes only what
+the space cannot express: correspondence follows the model's convention instead of sliding.
+
+References
+----------
+Blanz V., Vetter T. A morphable model for the synthesis of 3D faces. SIGGRAPH 1999 (fitting a
+linear face space with a prior on the coefficients).
+Li T. et al. Learning a model of facial shape and expression from 4D scans (FLAME). SIGGRAPH Asia
+2017 (registration through the model first, then free-form refinement).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .rigid import Similarity, _rotation_from_vector
+
+
+@dataclass(frozen=True)
+class ShapeBasis:
+    """Displacements of the template, one per basis mesh.
+
+    Attributes
+    ----------
+    names : (K,) the meshes' file stems
+    deltas : (K, n, 3) ``mesh_k - template``
+    source : where they were read (folder), for messages and reports
+    """
+
+    names: tuple
+    deltas: np.ndarray
+    source: str = ""
+
+    def subset(self, k: int) -> "ShapeBasis":
+        """The first ``k`` modes."""
+        return ShapeBasis(self.names[:k], self.deltas[:k], self.source)
+
+
+def basis_files(folder: str | os.PathLike, pattern: str = "*", what: str = "--identity-basis") -> list[Path]:
+    """The mesh files of a basis folder matching ``pattern``, sorted by name.
+
+    Raises
+    ------
+    InputError
+        No such folder, or no .obj/.ply file in it.
+    """
+    from .meshio import MESH_SUFFIXES
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{what} {folder}: expected a folder of meshes in the template's topology, found "
+                         f"{'a file' if folder.exists() else 'no such folder'}")
+    files = sorted(p for p in folder.glob(pattern) if p.suffix.lower() in MESH_SUFFIXES and p.is_file())
+    if not files:
+        raise InputError(f"{what} {folder}: expected .obj or .ply meshes in the template's topology, found none")
+    return files
+
+
+def read_shape_basis(files, V_ref: np.ndarray, F_ref: np.ndarray, ref_name: str, source: str = "") -> ShapeBasis:
+    """Read basis meshes (each of the template's topology) as displacements ``(K, n, 3)`` of ``V_ref``.
+
+    Raises
+    ------
+    TopologyError
+        A mesh with another vertex count or other triangles (names the file, expected and found).
+    """
+    from .meshio import read_mesh_like
+
+    files = list(files)
+    D = np.empty((len(files), len(V_ref), 3))
+    for k, p in enumerate(files):  # a loop over files, not vertices
+        D[k] = read_mesh_like(p, len(V_ref), F_ref, ref_name) - V_ref
+    return ShapeBasis(tuple(Path(p).stem for p in files), D, source)
+
+
+def template_bases(template: str | os.PathLike, V_ref: np.ndarray) -> tuple[list[Path], list[Path]]:
+    """Bases found beside a template in ICT-FaceKit's FaceXModel layout.
+
+    When the template's folder holds ``identity*.obj``: those are the identity basis, and the other
+    meshes of the folder with the template's vertex count (not the template itself) its expressions.
+    Returns ``(identity files, expression files)``, both empty otherwise.
+    """
+    t = Path(template).resolve()
+    ident = sorted(p for p in t.parent.glob("identity*") if p.suffix.lower() == ".obj" and p.is_file())
+    if not ident:
+        return [], []
+    expr = []
+    for p in sorted(t.parent.iterdir()):
+        if (p.suffix.lower() == ".obj" and p.is_file() and p.resolve() != t and p not in ident
+                and _obj_vertex_count(p) == len(V_ref)):
+            expr.append(p)
+    return ident, expr
+
+
+def _obj_vertex_count(path: Path) -> int:
+    """Number of ``v`` lines of an OBJ file (a cheap check before reading it)."""
+    data = b"\n" + path.read_bytes()
+    return data.count(b"\nv ") + data.count(b"\nv\t")
+
+
+@dataclass(frozen=True)
+class ModelFitOptions:
+    """Options of :func:`fit_shape_model`.
+
+    Attributes
+    ----------
+    iterations : closest-point / Gauss-Newton rounds at most
+    prior : ``mu`` of the module's energy (unit-free: times ``h^2``)
+    max_distance : pairs farther than this many ``h`` are dropped (and farther than 3 x the median
+        and h / 2)
+    normal_angle : degrees; pairs whose normals differ more are dropped
+    scale : also fit a uniform scale (another person; not for one person's expressions)
+    tolerance : stop when the largest vertex step is below this many ``h``
+    samples : at most this many model vertices (a seeded sample) pair with the scan
+    seed : seed of that sample
+    prior_start : if set, ``mu`` starts here and falls geometrically to ``prior`` over the first half
+        of the iterations (graduated: a strong prior first finds the basin, e.g. an opened jaw rather
+        than lips closed over the scan's mouth hole, where no data says otherwise)
+    """
+
+    iterations: int = 40
+    prior: float = 1e-4
+    max_distance: float = 10.0
+    normal_angle: float = 60.0
+    scale: bool = True
+    tolerance: float = 1e-3
+    samples: int = 5000
+    seed: int = 0
+    prior_start: float | None = None
+
+
+@dataclass(frozen=True)
+class ModelFit:
+    """Result of :func:`fit_shape_model`.
+
+    Attributes
+    ----------
+    vertices : (n, 3) the fitted mesh ``pose(base + c D)`` in the surface's frame
+    coefficients : (K,) ``c``
+    pose : the similarity applied to the model (surface's frame)
+    rms : final RMS point-to-plane residual of the kept pairs
+    pairs : how many pairs were kept in the last round
+    iterations : rounds run
+    """
+
+    vertices: np.ndarray
+    coefficients: np.ndarray
+    pose: Similarity
+    rms: float
+    pairs: int
+    iterations: int
+
+
+def _pairs(X, normals, surface, dmax, cos_max, use, floor):
+    """Kept model-to-scan pairs: indices, targets, scan normals (the tangent plane of the nearest scan
+    vertex, as the non-rigid stage's point-to-plane term; one bounded tree query)."""
+    U, N, dist, rim = surface.nearest_planes(X[use], True, dmax)
+    ok = (~rim) & (dist <= dmax) & ((normals[use] * N).sum(1) >= cos_max)
+    if ok.sum() > 10:
+        ok &= dist <= max(3.0 * float(np.median(dist[ok])), floor)
+    return use[ok], U[ok], N[ok]
+
+
+def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """``argmin ||A x - b||`` within ``lb <= x <= ub``, through the small normal matrix: with
+    ``A^T A = L L^T`` the problem is ``min ||L^T x - L^-1 A^T b||`` (same minimiser, (q, q) not (p, q))."""
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    H = A.T @ A
+    H += 1e-12 * np.trace(H) * np.eye(len(H))
+    g = A.T @ b
+    if np.all(np.isinf(lb)) and np.all(np.isinf(ub)):
+        return cho_solve(cho_factor(H), g)
+    L = np.linalg.cholesky(H)
+    return lsq_linear(L.T, solve_triangular(L, g, lower=True), bounds=(lb, ub), method="bvls").x
+
+
+def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h: float,
+                    options: ModelFitOptions = ModelFitOptions(), sigma=None, bounds=None,
+                    use: np.ndarray | None = None, c0=None) -> ModelFit:
+    """Fit ``pose(base + sum_k c_k deltas_k)`` to a scan surface (module docstring's energy).
+
+    Parameters
+    ----------
+    base : (n, 3) the model's mean (template or the person's neutral), roughly aligned to ``surface``
+    deltas : (K, n, 3) the basis
+    surface : :class:`.nricp.ScanSurface` in ``base``'s frame
+    normals_of : callable ``X (n, 3) -> (n, 3)`` unit vertex normals of the model's topology
+    h : length unit (the template's median edge length)
+    sigma : (K,) prior standard deviation of each coefficient (default 1)
+    bounds : ``(lo, hi)`` arrays (K,) or scalars, or None (unbounded)
+    use : vertices that may pair with the scan (default all; at most ``options.samples`` of them, a
+        seeded sample, are used)
+    c0 : (K,) start coefficients (default 0, or clipped into the bounds)
+
+    Returns
+    -------
+    ModelFit
+    """
+    K, n = deltas.shape[0], base.shape[0]
+    sigma = np.ones(K) if sigma is None else np.broadcast_to(np.asarray(sigma, float), (K,))
+    lo, hi = (np.full(K, -np.inf), np.full(K, np.inf)) if bounds is None else (
+        np.broadcast_to(np.asarray(bounds[0], float), (K,)), np.broadcast_to(np.asarray(bounds[1], float), (K,)))
+    c = np.clip(np.zeros(K) if c0 is None else np.asarray(c0, float), lo, hi)
+    use = np.arange(n) if use is None else np.asarray(use)
+    if len(use) > options.samples:  # a seeded sample of the vertices: the fit has few unknowns
+        use = np.sort(use[np.random.default_rng(options.seed).choice(len(use), options.samples, replace=False)])
+    npose = 7 if options.scale else 6
+    pose = Similarity()
+    Dflat = deltas.reshape(K, -1)
+    cos_max = np.cos(np.radians(options.normal_angle))
+    rms, kept, it = np.inf, 0, 0
+    X = pose.apply(base + (c @ Dflat).reshape(n, 3))
+    for it in range(1, options.iterations + 1):
+        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 0.5 * h)
+        kept = len(idx)
+        if kept < npose + 3:
+            break
+        x = X[idx]
+        r0 = ((x - Q) * N).sum(1)
+        rms = float(np.sqrt(np.mean(r0 ** 2)))
+        cen = x.mean(0)
+        y = x - cen
+        Jp = np.concatenate([np.cross(y, N), N, (y * N).sum(1, keepdims=True)], 1)[:, :npose]
+        # d x_i / d c_k = s R D_k,i: the normal's component, (p, K)
+        RN = pose.scale * (N @ pose.rotation)
+        Jc = np.einsum("kpj,pj->pk", deltas[:, idx, :], RN)
+        w = 1.0 / np.sqrt(kept)
+        mu = options.prior if options.prior_start is None else options.prior_start * (
+            options.prior / options.prior_start) ** min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
+        lam = np.sqrt(mu) * h / sigma
+        A = np.block([[w * Jp, w * Jc], [np.zeros((K, npose)), np.diag(lam)]])
+        b = np.concatenate([-w * r0, -lam * c])
+        lb = np.concatenate([np.full(npose, -np.inf), lo - c])
+        ub = np.concatenate([np.full(npose, np.inf), hi - c])
+        dx = _solve(A, b, lb, ub)
+        R = _rotation_from_vector(dx[:3])
+        s = 1.0 + dx[6] if options.scale else 1.0
+        pose = pose.then(Similarity(s, R, cen - s * R @ cen + dx[3:6]))
+        c = np.clip(c + dx[npose:], lo, hi)
+        X_new = pose.apply(base + (c @ Dflat).reshape(n, 3))
+        step = float(np.abs(X_new - X).max())
+        X = X_new
+        if step < options.tolerance * h and (options.prior_start is None or mu == options.prior):
+            break
+    return ModelFit(X, c, pose, rms, kept, it)

@@ -1,0 +1,199 @@
+"""Registration through a shape model first: identity basis, expressions through the rig, bad bases.
+
+Tiny data built here: the built-in default face (about 4k vertices) as the template, smooth random
+identity modes, its own expressions; scans are subdivided (another topology), shuffled and moved.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from facebasis.cli import main
+from facebasis.errors import FacebasisError, InputError, TopologyError
+from facebasis.geometry.meshio import write_mesh
+from facebasis.geometry.nricp import NonRigidICP
+from facebasis.geometry.registerfiles import register_files
+from facebasis.geometry.registration import Registration
+from facebasis.geometry.shapemodel import ShapeBasis
+from problems.bench_registration import random_rotation
+
+
+@lru_cache(maxsize=1)
+def face():
+    from facebasis.defaults.face import default_template
+
+    return default_template()
+
+
+def modes(V, k=6, seed=0):
+    """``k`` smooth random displacement fields (k, n, 3) of about 0.5 cm."""
+    rng = np.random.default_rng(seed)
+    c = V[rng.choice(len(V), k)]
+    w = np.exp(-((V[None] - c[:, None]) ** 2).sum(2) / (2 * 3.0 ** 2))
+    return w[:, :, None] * rng.uniform(-0.5, 0.5, (k, 1, 3))
+
+
+def as_scan(V, F, seed=0):
+    """Another topology (midpoint subdivision), shuffled vertices, a rigid motion: (S, G, R, t)."""
+    import trimesh
+
+    S, G = trimesh.remesh.subdivide(V, F)
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(len(S))
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(len(perm))
+    R, t = random_rotation(rng), rng.uniform(-5, 5, 3)
+    return S[perm] @ R.T + t, inv[G], R, t
+
+
+def test_person_in_a_known_identity_space_is_recovered_to_its_coefficients():
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    D = modes(T)
+    c = np.array([0.8, -1.2, 0.5, 1.5, -0.3, 0.9])
+    person = T + np.tensordot(c, D, 1)
+    S, G, R, t = as_scan(person, F)
+    res = Registration(T, F, identity=ShapeBasis(tuple(f"m{k}" for k in range(6)), D, "test")).register(S, G)
+    assert res.model_kind == "identity"
+    assert np.abs(res.model.coefficients - c).max() < 0.05, res.model.coefficients
+    err = np.linalg.norm(res.vertices - (person @ R.T + t), axis=1)
+    assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.03
+    rep = res.report()["identity"]
+    assert set(rep["coefficients"]) == {f"m{k}" for k in range(6)} and rep["iterations"] >= 1
+
+
+def test_detail_outside_the_identity_space_survives_the_non_rigid_stage():
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    D = modes(T)
+    c = np.array([0.8, -1.2, 0.5, 1.5, -0.3, 0.9])
+    n = NonRigidICP(F, len(T)).vertex_normals(T + np.tensordot(c, D, 1))
+    # a 2.5 mm bump along the normals on the cheek, which no mode has
+    front = np.flatnonzero(T[:, 2] > np.median(T[:, 2]))
+    centre = T[front[np.argmin(((T[front, :2] - [3.0, -1.0]) ** 2).sum(1))]]
+    bump = 0.25 * np.exp(-((T - centre) ** 2).sum(1) / (2 * 1.0 ** 2))
+    person = T + np.tensordot(c, D, 1) + bump[:, None] * n
+    S, G, R, t = as_scan(person, F, seed=1)
+    res = Registration(T, F, identity=ShapeBasis(tuple(f"m{k}" for k in range(6)), D, "test")).register(S, G)
+    truth = person @ R.T + t
+    where = bump > 0.1
+    model_err = np.linalg.norm(res.similarity.apply(res.model.vertices)[where] - truth[where], axis=1)
+    err = np.linalg.norm(res.vertices[where] - truth[where], axis=1)
+    assert np.median(model_err) > 0.05          # the space cannot express the bump ...
+    assert np.median(err) < 0.3 * np.median(model_err) and np.median(err) < 0.03  # ... the non-rigid stage keeps it
+
+
+@pytest.mark.parametrize("transfer", ["linear", "deformation"])
+def test_expression_built_from_the_rig_is_registered_to_its_weights(transfer):
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    reg = Registration(T, F, expressions=ShapeBasis(rig.names, rig.deltas, "test"))
+    w = np.zeros(len(rig.names))
+    w[rig.names.index("jawOpen")], w[rig.names.index("mouthSmile_L")] = 0.7, 0.4
+    S0, G0, _, _ = as_scan(T, F, seed=2)
+    neutral = reg.register(S0, G0).vertices
+    S, G, R, t = as_scan(T + np.tensordot(w, rig.deltas, 1), F, seed=3)
+    res = reg.register(S, G, start=neutral, expressions=reg.person_expressions(neutral, transfer))
+    assert res.model_kind == "expressions"
+    assert np.abs(res.model.coefficients - w).max() < 0.1, dict(zip(rig.names, res.model.coefficients.round(2)))
+    err = np.linalg.norm(res.vertices - (T + np.tensordot(w, rig.deltas, 1)) @ R.T - t, axis=1)
+    assert np.percentile(err, 95) < 0.1
+    assert res.report()["expressions"]["coefficients"]["jawOpen"] == pytest.approx(0.7, abs=0.1)
+
+
+def test_expressions_without_a_basis_or_a_start_are_refused():
+    rig = face()
+    reg = Registration(rig.neutral, rig.faces)
+    with pytest.raises(InputError, match="no expression basis"):
+        reg.person_expressions(rig.neutral)
+    with pytest.raises(InputError, match="without a start mesh"):
+        reg.register(rig.neutral, rig.faces, expressions=rig.deltas)
+    reg = Registration(rig.neutral, rig.faces, expressions=ShapeBasis(rig.names, rig.deltas, "x"))
+    with pytest.raises(InputError, match="transfer: expected 'deformation' or 'linear', found 'x'"):
+        reg.person_expressions(rig.neutral, "x")
+    with pytest.raises(InputError, match=r"identity basis b: expected displacements of shape \(K, \d+, 3\)"):
+        Registration(rig.neutral, rig.faces, identity=ShapeBasis(("a",), np.zeros((1, 5, 3)), "b"))
+
+
+@pytest.fixture
+def files(tmp_path):
+    rig = face()
+    write_mesh(tmp_path / "t.obj", rig.neutral, rig.faces)
+    write_mesh(tmp_path / "scan.obj", rig.neutral + 0.1, rig.faces)
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "other").mkdir()
+    (tmp_path / "good").mkdir()
+    write_mesh(tmp_path / "good" / "identity000.obj", rig.neutral + modes(rig.neutral, 1)[0], rig.faces)
+    write_mesh(tmp_path / "other" / "identity000.obj", rig.neutral[:-3], rig.faces[np.all(rig.faces < len(rig.neutral) - 3, 1)])
+    return tmp_path
+
+
+def test_a_basis_of_another_topology_is_refused_naming_the_file(files):
+    n = len(face().neutral)
+    with pytest.raises(TopologyError, match=rf"identity000.obj: expected {n} vertices as in .*t.obj, found {n - 3}"):
+        register_files(files / "scan.obj", files / "t.obj", files / "out", identity_basis=files / "other")
+    assert not (files / "out").exists()
+
+
+def test_an_empty_basis_folder_is_refused(files):
+    with pytest.raises(InputError, match=r"--expression-basis .*empty: expected .obj or .ply meshes in the "
+                                         r"template's topology, found none"):
+        register_files(files / "scan.obj", files / "t.obj", files / "out", expression_basis=files / "empty")
+    with pytest.raises(InputError, match=r"--identity-basis .*nothing: expected a folder of meshes .* found no such"):
+        register_files(files / "scan.obj", files / "t.obj", files / "out", identity_basis=files / "nothing")
+    assert not (files / "out").exists()
+
+
+def test_an_unknown_expression_transfer_is_refused(files):
+    with pytest.raises(InputError, match="--expression-transfer: expected 'deformation' or 'linear', found 'affine'"):
+        register_files(files / "scan.obj", files / "t.obj", files / "out", expression_transfer="affine")
+    assert not (files / "out").exists()
+
+
+def test_a_scan_without_faces_is_refused_with_a_basis(files):
+    (files / "cloud.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    with pytest.raises(FacebasisError, match="cloud.obj: expected vertices and faces, found 3 vertices and 0 faces"):
+        register_files(files / "cloud.obj", files / "t.obj", files / "out", identity_basis=files / "good")
+    assert not (files / "out").exists()
+
+
+def test_cli_basis_options(files, capsys):
+    rc = main(["register", str(files / "scan.obj"), "--template", str(files / "t.obj"), "--out", str(files / "out"),
+               "--identity-basis", str(files / "empty")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("error: --identity-basis") and "found none" in err and err.count("\n") == 1
+    with pytest.raises(SystemExit) as e:
+        main(["register", str(files / "scan.obj"), "--template", str(files / "t.obj"), "--out", str(files / "out"),
+              "--expression-basis", str(files / "empty"), "--expression-basis", str(files / "empty")])
+    assert e.value.code == 2 and "--expression-basis" in capsys.readouterr().err
+    assert not (files / "out").exists()
+
+
+def test_cli_auto_detects_identity_meshes_beside_the_template(files, capsys):
+    rig = face()
+    D = modes(rig.neutral, 3)
+    ict = files / "facex"
+    ict.mkdir()
+    write_mesh(ict / "neutral.obj", rig.neutral, rig.faces)
+    for k in range(3):
+        write_mesh(ict / f"identity{k:03d}.obj", rig.neutral + D[k], rig.faces)
+    write_mesh(ict / "jawOpen.obj", rig.neutral + rig.deltas[rig.names.index("jawOpen")], rig.faces)
+    c = np.array([1.0, -0.5, 0.7])
+    S, G, _, _ = as_scan(rig.neutral + np.tensordot(c, D, 1), rig.faces, seed=4)
+    write_mesh(files / "person.obj", S, G)
+    rc = main(["register", str(files / "person.obj"), "--template", str(ict / "neutral.obj"), "--out", str(files / "o")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "identity basis: 3 meshes found beside the template" in out
+    assert "expression basis: 1 meshes found beside the template" in out
+    import json
+
+    rep = json.loads((files / "o" / "person.json").read_text())
+    got = [rep["identity"]["coefficients"][f"identity{k:03d}"] for k in range(3)]
+    assert np.allclose(got, c, atol=0.05)
+    rc = main(["register", str(files / "person.obj"), "--template", str(ict / "neutral.obj"), "--out", str(files / "o2"),
+               "--identity-basis", "none"])
+    assert rc == 0 and "identity" not in json.loads((files / "o2" / "person.json").read_text())

@@ -114,7 +114,7 @@ def main(argv=None) -> int:
               f"shapes solved with contact: plain {totals[0]} new pairs ({totals[1]} layer crossings, "
               f"{totals[0] - totals[1]} local folds, lids {totals[2]}) -> contact {totals[3]} new pairs ({totals[4]} layer "
               f"crossings, {totals[3] - totals[4]} local folds, lids {totals[5]})  [target 0, 0 at the lids]"
-              + (f"; excluded, left as plain transfer: " + ", ".join(f"{r[0].name} {r[1][1][0]} new pairs (lids "
+              + ("; excluded, left as plain transfer: " + ", ".join(f"{r[0].name} {r[1][1][0]} new pairs (lids "
                                                                    f"{r[1][1][2]})" for r in excl) if excl else ""))
         agree = all(r[1][1][0] == r[0].new_pairs_left for r in rows if not r[0].excluded)
         print(f"  solver's own count agrees with penetration_report on every shape: {agree}")

@@ -17,13 +17,11 @@ and the held-out error relative to the ``--reference`` procedure's; the table of
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import time
 from pathlib import Path
 
-import numpy as np
 
 
 def run(m: int, seed: int, candidates, n_heldout: int, out: Path, default: bool = True, ipopt: str = "final") -> None:

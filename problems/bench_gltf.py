@@ -37,7 +37,6 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import numpy as np
 
     from facebasis.geometry import obj
     from facebasis.geometry.gltf import _finish, glb_bytes, gltf_document

@@ -84,7 +84,6 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print) -> tu
     from facebasis.geometry.shapemodel import ShapeBasis
     from facebasis.rigging.crossval import heldout_error
     from facebasis.rigging.generation import BlendshapeGenerator, GenerationOptions
-    from problems.ict import _load
 
     d, F, T, face, keep, head = _ict_setup()
     p, truth_rig = pp.problem, pp.truth

@@ -19,7 +19,6 @@ outside it):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 

@@ -4,8 +4,7 @@
 person problem (seed, m), cross-validation over the grid extended down to 1e-4, its choice and
 held-out error, and the held-out error of the fixed schedule (5a, a) for every grid alpha.
 """
-import dataclasses, json, time, os, sys
-import numpy as np
+import json, time, os, sys
 from facebasis.rigging.heldout import heldout_error
 from facebasis.rigging.generation import BlendshapeGenerator
 from facebasis.rigging.problem import GenerationOptions

@@ -10,7 +10,7 @@ An entry (:class:`Recipe`) names the files it writes (glob patterns relative to 
 shell commands that write them (``{python}`` is this interpreter, ``{tmp}`` a temporary folder
 removed afterwards, ``{shared}`` the shared data folder ``../shared``, ``{reports}`` the reports
 folder), the data it needs and the script behind it. ``ict`` needs ``../shared/data/ict/ict_face.npz``,
-``video`` the webcam clips in ``../shared/data/video/`` and ``detect`` the ``[detect]`` extra (dlib):
+``video`` the webcam clips in ``../shared/data/video/`` ``detect`` the ``[detect]`` extra (dlib) and ``mediapipe`` its extra:
 an entry whose data or extra is missing is skipped with one line saying what is missing, never an
 error. *Archived* entries keep files that no current command regenerates (a measurement of an earlier
 version of the code, kept for comparison); ``--list`` says how they were made. *Notes* are written by
@@ -26,7 +26,6 @@ import argparse
 import fnmatch
 import importlib.util
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -46,7 +45,7 @@ class Recipe:
     what : one line on what the files show
     files : glob patterns relative to ``reports/``
     commands : shell commands run in order from the repository root (empty for an archived entry)
-    data : what it needs: ``ict``, ``video``, ``detect`` (the dlib extra)
+    data : what it needs: ``ict``, ``video``, ``detect`` (the dlib extra), ``mediapipe`` (its extra)
     script : the module or script behind it
     archived : why no current command regenerates the files, and how they were made
     """
@@ -87,6 +86,10 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("capture-real", "Tracking the shared clips against per-frame dlib: plain LK, tracking only, each "
            "detector fed to the filter, MediaPipe alone", ("capture/real_clips.csv",),
            (f"{PY} problems.bench_capture_real",), data=("video", "detect"), script="problems/bench_capture_real.py"),
+    Recipe("capture-speed", "Capture speed: the whole `capture --detector mediapipe` command on a 360x288 clip "
+           "(decoding included) and landmarks + mesh at 1024x768, CPU and wall ms per frame",
+           ("capture/speed.csv",), (f"{PY} problems.bench_capture_speed",), data=("video", "mediapipe"),
+           script="problems/bench_capture_speed.py"),
     Recipe("capture-synthetic", "Capture accuracy per stage on generated sequences with exact landmarks, drift "
            "over a long take", ("capture/accuracy.csv", "capture/drift.png", "capture/drift.pdf"),
            (f"{PY} problems.bench_capture",), data=("video",), script="problems/bench_capture.py"),
@@ -141,6 +144,11 @@ RECIPES: tuple[Recipe, ...] = (
            ("registration/registration.csv", "registration/registration.md"),
            (f"{PY} problems.bench_registration --expressions 4 --rig 12",), data=("ict",),
            script="problems/bench_registration.py"),
+    Recipe("registration-rig", "Rigs from registered scans against rigs from the exact examples (held-out error), "
+           "persons inside and outside the identity space, fits with 100 and 60 modes; per-scan errors",
+           ("registration/rig.csv", "registration/rig.md", "registration/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline",), data=("ict",),
+           script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",
            ("retarget/retarget_table.csv", "retarget/retarget_table.md", "retarget/identity_table.csv",
@@ -225,6 +233,9 @@ def missing_data(recipe: Recipe) -> list[str]:
         elif d == "detect":
             if importlib.util.find_spec("dlib") is None:
                 out.append("the [detect] extra (pip install '.[detect]')")
+        elif d == "mediapipe":
+            if importlib.util.find_spec("mediapipe") is None:
+                out.append("the [mediapipe] extra (pip install '.[mediapipe]')")
     return out
 
 

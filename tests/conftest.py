@@ -1,9 +1,13 @@
-import sys
+import json
+import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from facebasis.geometry.rig import Rig
 from problems.ict import ict_available  # the repository root is on sys.path: pytest's `pythonpath` (pyproject.toml)
 
 
@@ -161,3 +165,57 @@ def swallow_signal_inside_ipopt(monkeypatch, signum):
         self._solver = swallowing
 
     monkeypatch.setattr(weights.WeightSolver, "__init__", init)
+
+
+def _validator_dir():
+    """A folder whose node_modules holds the npm package gltf-validator, or None."""
+    if shutil.which("node") is None:
+        return None
+    for base in filter(None, [os.environ.get("FACEBASIS_GLTF_VALIDATOR"), "/tmp/gltfv", str(Path.home())]):
+        if (Path(base) / "node_modules" / "gltf-validator").is_dir():
+            return Path(base)
+    return None
+
+
+def gltf_validate(path):
+    """The Khronos glTF-Validator's issues for ``path`` (.glb, or .gltf with its files beside it); the
+    test skips where the npm package is not installed."""
+    base = _validator_dir()
+    if base is None:
+        pytest.skip("npm package gltf-validator not installed (set FACEBASIS_GLTF_VALIDATOR to its folder)")
+    # a .gltf's buffer and images are read beside it
+    script = ("const v=require('gltf-validator');const fs=require('fs');const p=require('path');"
+              f"const f={json.dumps(str(path))};"
+              "const ext=(u)=>new Promise((ok,no)=>{try{ok(new Uint8Array(fs.readFileSync(p.join(p.dirname(f),"
+              "decodeURIComponent(u)))));}catch(e){no(e.toString());}});"
+              "v.validateBytes(new Uint8Array(fs.readFileSync(f)),{uri:f,externalResourceFunction:ext})"
+              ".then(r=>{console.log(JSON.stringify(r.issues));}).catch(e=>{console.error(e);process.exit(3);});")
+    out = subprocess.run(["node", "-e", script], cwd=base, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def two_sheets(gap=0.6, push=0.5, bottom_len=1.5):
+    """A long top sheet (x in [0, 4]) above a short bottom sheet (x in [0, bottom_len]) at distance
+    ``gap``; the template shape pushes the top sheet down by ``push`` (still along its long borders,
+    which anchor it). Returns the template rig."""
+    Vt, Ft = grid_sheet(21, 7, z=gap, size=4.0)
+    Vb, Fb = grid_sheet(9, 7, z=0.0, size=bottom_len)
+    Vb[:, 1] *= 4.0 / bottom_len  # same width as the top sheet
+    Vb[:, :2] += (0.05, 0.0)
+    Vt[:, 2] += 0.01 * np.sin(3.0 * Vt[:, 0] + 1.0) * np.cos(2.0 * Vt[:, 1])  # not coplanar: fast exact tests
+    Vb[:, 2] += 0.01 * np.cos(2.0 * Vb[:, 0]) * np.sin(3.0 * Vb[:, 1] + 0.5)
+    V = np.concatenate([Vt, Vb])
+    F = np.concatenate([Ft, Fb + len(Vt)])
+    d = np.zeros_like(V)
+    y = Vt[:, 1] / Vt[:, 1].max()
+    d[: len(Vt), 2] = -push * np.sin(np.pi * y) ** 2
+    return Rig(V, F, ("push", "still"), np.stack([d, np.zeros_like(d)]))
+
+
+def stretched(V, sx=1.1, gap=0.3):
+    """The target neutral: stretched along x, the top sheet lowered to ``gap`` above the bottom one."""
+    W = V.copy()
+    W[:, 0] *= sx
+    W[W[:, 2] > 0.1, 2] += gap - 0.6
+    return W

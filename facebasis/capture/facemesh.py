@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from facebasis.errors import MeshError
+from facebasis.geometry.mesh import boundary_vertices
 
 from .landmarks import INNER_LIP_PARTNERS, face_width
 
@@ -140,13 +141,6 @@ def signed_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Signed triangle areas, ``(M,)`` (positive = counter-clockwise in x-right, y-up terms)."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-
-
-def boundary_vertices(F: np.ndarray) -> np.ndarray:
-    """Vertices on boundary edges (edges used by one triangle only)."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(E, axis=0, return_counts=True)
-    return np.unique(uniq[counts == 1])
 
 
 def build_face_mesh(landmarks: np.ndarray, spacing: float | None = None) -> FaceMesh:

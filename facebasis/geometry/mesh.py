@@ -175,6 +175,20 @@ def unique_edges(F) -> np.ndarray:
     return np.stack([key // n, key % n], axis=1)
 
 
+def boundary_vertices(F) -> np.ndarray:
+    """Sorted indices (b,) int64 of the vertices on a boundary edge (an edge of exactly one triangle of
+    ``F`` (m, 3))."""
+    F = np.asarray(F, np.int64).reshape(-1, 3)
+    if len(F) == 0:
+        return np.zeros(0, np.int64)
+    e = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    n = np.int64(hi.max()) + 1
+    key, count = np.unique(lo * n + hi, return_counts=True)
+    once = key[count == 1]
+    return np.unique(np.concatenate([once // n, once % n]))
+
+
 def median_edge_length(V, F) -> float:
     """Median length of the triangle edges of ``V`` (n, 3), ``F`` (m, 3) (interior edges counted twice)."""
     e = V[F[:, [1, 2, 0]]] - V[F]

@@ -63,6 +63,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .cholesky import SparseCholesky
+from .mesh import boundary_vertices, unique_edges
+
 
 def closest_point_on_triangles(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
     """Closest point on triangle ``(A, B, C)`` to ``P``, row by row (Ericson 2004, sec. 5.1.5).
@@ -108,14 +111,10 @@ def vertex_face_incidence(F: np.ndarray, n_vertices: int) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(3 * m), (F.ravel(), np.repeat(np.arange(m), 3))), shape=(n_vertices, m))
 
 
-def boundary_vertices(F: np.ndarray, n_vertices: int) -> np.ndarray:
+def boundary_mask(F: np.ndarray, n_vertices: int) -> np.ndarray:
     """Mask (n,) of the vertices on a boundary edge (an edge of exactly one triangle)."""
-    e = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    key, count = np.unique(e[:, 0] * np.int64(n_vertices) + e[:, 1], return_counts=True)
-    once = key[count == 1]
     mask = np.zeros(n_vertices, bool)
-    mask[once // n_vertices] = True
-    mask[once % n_vertices] = True
+    mask[boundary_vertices(F)] = True
     return mask
 
 
@@ -145,7 +144,7 @@ class ScanSurface:
         table[sv[keep], pos[keep]] = st[keep]
         first = table[:, :1]
         self.ring = np.where(table >= 0, table, first)
-        rim = boundary_vertices(F, len(V))
+        rim = boundary_mask(F, len(V))
         self.rim_face = rim[F].any(axis=1)
         # rim vertices: a corner of a triangle that touches a rim
         self._inc = vertex_face_incidence(F, len(V))
@@ -292,7 +291,7 @@ class NonRigidICP:
 
     def __init__(self, F: np.ndarray, n_vertices: int):
         self.F, self.n = F, n_vertices
-        e = np.unique(np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+        e = unique_edges(F)
         self.edges = e
         k = len(e)
         rows = np.repeat(np.arange(k), 2)
@@ -350,8 +349,6 @@ class NonRigidICP:
         -------
         NricpResult
         """
-        from cholespy import CholeskySolverD, MatrixType
-
         X = np.array(P if X0 is None else X0, dtype=np.float64)
         if h is None:
             h = float(np.median(np.linalg.norm(P[self.edges[:, 1]] - P[self.edges[:, 0]], axis=1)))
@@ -368,9 +365,7 @@ class NonRigidICP:
             return U, dist, ok
 
         def factor(alpha, diag):
-            A = (alpha ** 2 * self.L + sp.diags(diag + 1e-9)).tocoo()
-            return CholeskySolverD(self.n, A.row.astype(np.int32), A.col.astype(np.int32), A.data,
-                                   MatrixType.COO)
+            return SparseCholesky(alpha ** 2 * self.L + sp.diags(diag + 1e-9))
 
         for level, alpha in enumerate(options.stiffness):
             beta = _level_value(options.landmark_weight, level) if has_lm else 0.0
@@ -392,8 +387,7 @@ class NonRigidICP:
                 rhs = alpha ** 2 * (self.M.T @ target_edges) + w[:, None] * U
                 if beta > 0:
                     np.add.at(rhs, landmarks, beta ** 2 * landmark_points)
-                X_new = np.zeros_like(X)
-                chol.solve(np.ascontiguousarray(rhs), X_new)
+                X_new = chol.solve(rhs)
                 iterations += 1
                 step = float(np.percentile(np.linalg.norm(X_new - X, axis=1), 95))
                 X = X_new

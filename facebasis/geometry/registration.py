@@ -16,7 +16,7 @@ back onto the scan. Landmarks may be given (indices or points) or found on the s
 landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
 person's expressions, register the neutral scan first, then each expression with
 ``start=<registered neutral>``: every expression then starts from the person's own neutral, so a
-vertex index means the same point of the face across the set. :func:`register_files` does this
+vertex index means the same point of the face across the set. :func:`.registerfiles.register_files` does this
 for files (:mod:`.registerfiles`) and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per
 scan, atomically.
 
@@ -29,10 +29,8 @@ CVPR 2007.
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -406,16 +404,3 @@ def register_scan(template_V, template_F, scan_V, scan_F, options: RegistrationO
     return Registration(template_V, template_F, options, template_landmarks).register(
         scan_V, scan_F, scan_landmarks, start)
 
-
-def register_files(*args, **kwargs) -> dict:
-    """Register scan files and write the results (:func:`.registerfiles.register_files`)."""
-    from .registerfiles import register_files as _register_files
-
-    return _register_files(*args, **kwargs)
-
-
-def read_landmarks(path):
-    """Read a landmark JSON file (:func:`.registerfiles.read_landmarks`)."""
-    from .registerfiles import read_landmarks as _read_landmarks
-
-    return _read_landmarks(path)

@@ -134,7 +134,6 @@ def render_image(V, F, crop, width: int, values=None, vmin=0.0, vmax=1.0, cmap=N
     -------
     (height, width, 3) uint8
     """
-    from ..geometry.raster import SKIN_RGB
 
     (x0, x1), (y0, y1) = crop
     ss = max(1, int(supersample))

@@ -23,7 +23,6 @@ from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from .figures import _pyplot, convergence_figure, save
 from .penetration import penetration_figure  # noqa: F401  (re-exported)
-from .render import draw_mesh
 from .sweep import formulation_report, sweep_report  # noqa: F401  (re-exported)
 from .tables import csv_table, markdown_table, write_table  # noqa: F401  (re-exported)
 

@@ -16,7 +16,8 @@ from facebasis.capture.detect import (
     detect_landmarks,
     mediapipe_to_ibug68,
 )
-from facebasis.capture.facemesh import boundary_vertices, build_face_mesh, signed_areas
+from facebasis.capture.facemesh import build_face_mesh, signed_areas
+from facebasis.geometry.mesh import boundary_vertices
 from facebasis.capture.landmarks import format_pts, read_landmarks
 from facebasis.capture.synthetic import Motion, WarpAnimation, cartoon_face
 from facebasis.capture.video import VideoWarning, open_frames
@@ -236,7 +237,7 @@ def test_cli_capture_reports_truncation_and_lost_points(tmp_path, capsys):
     assert "warning: video" in err and "its container announced 30" in err
     n = read_capture(tmp_path / "o").n_frames
     assert 0 < n < 30 and f"tracked {n} frames" in out
-    assert f"per frame on average; " in out and f"of {n} frames had at least one" in out
+    assert "per frame on average; " in out and f"of {n} frames had at least one" in out
 
 
 def test_lost_summary_line():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from facebasis.geometry.mesh import boundary_vertices
 from facebasis.capture.facemesh import (
-    boundary_vertices,
     build_face_mesh,
     points_in_polygon,
     signed_areas,

@@ -281,7 +281,7 @@ def test_contact_workers_stop_with_their_parent_and_print_nothing(tmp_path, sig,
     (SIGKILL: the kernel ends them, PR_SET_PDEATHSIG), none prints (Ctrl-C reaches the whole
     group: the workers ignore it, the parent prints one line)."""
     psutil = pytest.importorskip("psutil")
-    from test_contact_exact import stretched, two_sheets
+    from conftest import stretched, two_sheets
 
     from facebasis.geometry.meshio import write_mesh
     from facebasis.geometry.rig import write_rig_folder
@@ -705,7 +705,7 @@ def test_a_broken_shape_link_in_a_rig_folder_is_named(small, tmp_path):
 def test_a_scan_named_summary_is_refused(small, tmp_path):
     import shutil
 
-    from facebasis.geometry.registration import register_files
+    from facebasis.geometry.registerfiles import register_files
 
     (tmp_path / "scans").mkdir()
     shutil.copy(small / "a.obj", tmp_path / "scans" / "neutral.obj")

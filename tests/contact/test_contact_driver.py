@@ -13,7 +13,7 @@ from facebasis.contact.exact import contact_correct, contact_transfer
 from facebasis.contact.solver import ContactShape, ContactSolver
 from facebasis.errors import SolverError
 from facebasis.geometry.transfer import DeformationTransfer
-from test_contact_exact import stretched, two_sheets
+from conftest import stretched, two_sheets
 
 needs_fork = pytest.mark.skipif(sys.platform != "linux" or "fork" not in mp.get_all_start_methods(),
                                 reason="the worker processes need fork")

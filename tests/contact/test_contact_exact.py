@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest import grid_sheet
+from conftest import grid_sheet, stretched, two_sheets
 from facebasis.contact.exact import contact_correct, contact_transfer
 from facebasis.contact.penetration import intersecting_pairs, penetration_report, triangle_pairs_intersect
 from facebasis.contact.proximity import candidate_pairs, new_pairs, triangle_distance
@@ -13,32 +13,6 @@ from facebasis.errors import InputError
 from facebasis.geometry.rig import Rig
 from facebasis.geometry.transfer import DeformationTransfer
 from test_virtual_edges import press_rig
-
-
-def two_sheets(gap=0.6, push=0.5, bottom_len=1.5):
-    """A long top sheet (x in [0, 4]) above a short bottom sheet (x in [0, bottom_len]) at distance
-    ``gap``; the template shape pushes the top sheet down by ``push`` (still along its long borders,
-    which anchor it). Returns the template rig."""
-    Vt, Ft = grid_sheet(21, 7, z=gap, size=4.0)
-    Vb, Fb = grid_sheet(9, 7, z=0.0, size=bottom_len)
-    Vb[:, 1] *= 4.0 / bottom_len  # same width as the top sheet
-    Vb[:, :2] += (0.05, 0.0)
-    Vt[:, 2] += 0.01 * np.sin(3.0 * Vt[:, 0] + 1.0) * np.cos(2.0 * Vt[:, 1])  # not coplanar: fast exact tests
-    Vb[:, 2] += 0.01 * np.cos(2.0 * Vb[:, 0]) * np.sin(3.0 * Vb[:, 1] + 0.5)
-    V = np.concatenate([Vt, Vb])
-    F = np.concatenate([Ft, Fb + len(Vt)])
-    d = np.zeros_like(V)
-    y = Vt[:, 1] / Vt[:, 1].max()
-    d[: len(Vt), 2] = -push * np.sin(np.pi * y) ** 2
-    return Rig(V, F, ("push", "still"), np.stack([d, np.zeros_like(d)]))
-
-
-def stretched(V, sx=1.1, gap=0.3):
-    """The target neutral: stretched along x, the top sheet lowered to ``gap`` above the bottom one."""
-    W = V.copy()
-    W[:, 0] *= sx
-    W[W[:, 2] > 0.1, 2] += gap - 0.6
-    return W
 
 
 def new_count(rig, target, deltas, names):

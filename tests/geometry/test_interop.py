@@ -265,7 +265,7 @@ def test_export_neutral_and_exclude_like_transfer(facex, tmp_path, capsys):
 
 
 def test_exported_files_pass_the_khronos_validator(facex, tmp_path):
-    from test_retarget_gltf import _validate
+    from conftest import gltf_validate as _validate
 
     _, out, _, _ = facex
     for name in ("r.glb", "r.gltf"):
@@ -425,7 +425,7 @@ def test_template_without_normals_uv_only_as_ict_ships(tmp_path):
     src = (folder / "jawOpen.obj").read_text().splitlines()
     assert not any(x.startswith("vn") for x in out)
     assert [x for x in out if not x.startswith("v ")] == [x for x in src if not x.startswith("v ")]
-    from test_retarget_gltf import _validate
+    from conftest import gltf_validate as _validate
 
     assert _validate(tmp_path / "r.glb")["numErrors"] == 0
 

@@ -6,7 +6,7 @@ import scipy.sparse as sp
 
 from conftest import bumpy_sheet, grid_sheet
 from facebasis.geometry.cholesky import SparseCholesky
-from facebasis.geometry.mesh import unique_edges
+from facebasis.geometry.mesh import boundary_vertices, unique_edges
 from facebasis.retarget.rbf import mean_edge_length
 
 
@@ -45,3 +45,14 @@ def test_sparse_cholesky_solves_one_or_many_columns_and_refuses_an_indefinite_ma
     assert np.allclose(chol.solve(b[:, 0]), x[:, 0], atol=1e-12)
     with pytest.raises((RuntimeError, ValueError)):
         SparseCholesky(sp.diags(np.r_[np.ones(5), -1.0]).tocsr())
+
+
+def test_boundary_vertices_of_a_sheet_a_triangle_and_a_closed_surface():
+    """A 6 x 5 grid sheet: its 18 border vertices; one triangle: all three; a tetrahedron (closed): none."""
+    V, F = grid_sheet(6, 5)
+    ij = np.stack(np.unravel_index(np.arange(30), (5, 6)), 1)
+    border = np.flatnonzero((ij[:, 0] % 4 == 0) | (ij[:, 1] % 5 == 0))
+    np.testing.assert_array_equal(boundary_vertices(F), border)
+    np.testing.assert_array_equal(boundary_vertices([[4, 2, 7]]), [2, 4, 7])
+    tet = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    assert boundary_vertices(tet).size == 0 and boundary_vertices(np.zeros((0, 3), int)).size == 0

@@ -9,7 +9,8 @@ import pytest
 
 from facebasis.errors import InputError, MeshError
 from facebasis.geometry.nricp import closest_point_on_triangles
-from facebasis.geometry.registration import Registration, register_files, register_scan
+from facebasis.geometry.registerfiles import register_files
+from facebasis.geometry.registration import Registration, register_scan
 from facebasis.geometry.rigid import Similarity
 from problems.bench_registration import random_rotation
 

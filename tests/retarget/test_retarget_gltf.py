@@ -1,14 +1,10 @@
 """The animated GLB: loads back with pygltflib and trimesh; keyframes, weights in [0, 1]; validator."""
 
-import json
-import os
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import gltf_validate as _validate
 from facebasis.defaults.face import default_template
 from facebasis.errors import InputError
 from facebasis.retarget.animation import animated_glb_bytes, frame_times, write_rig_animation
@@ -61,32 +57,6 @@ def test_trimesh_loads_the_mesh(glb):
     (geom,) = scene.geometry.values()
     assert len(geom.vertices) == rig.n_vertices
     assert len(geom.faces) == len(rig.faces)
-
-
-def _validator_dir():
-    """A folder whose node_modules holds the npm package gltf-validator, or None."""
-    if shutil.which("node") is None:
-        return None
-    for base in filter(None, [os.environ.get("FACEBASIS_GLTF_VALIDATOR"), "/tmp/gltfv", str(Path.home())]):
-        if (Path(base) / "node_modules" / "gltf-validator").is_dir():
-            return Path(base)
-    return None
-
-
-def _validate(path):
-    base = _validator_dir()
-    if base is None:
-        pytest.skip("npm package gltf-validator not installed (set FACEBASIS_GLTF_VALIDATOR to its folder)")
-    # a .gltf's buffer and images are read beside it
-    script = ("const v=require('gltf-validator');const fs=require('fs');const p=require('path');"
-              f"const f={json.dumps(str(path))};"
-              "const ext=(u)=>new Promise((ok,no)=>{try{ok(new Uint8Array(fs.readFileSync(p.join(p.dirname(f),"
-              "decodeURIComponent(u)))));}catch(e){no(e.toString());}});"
-              "v.validateBytes(new Uint8Array(fs.readFileSync(f)),{uri:f,externalResourceFunction:ext})"
-              ".then(r=>{console.log(JSON.stringify(r.issues));}).catch(e=>{console.error(e);process.exit(3);});")
-    out = subprocess.run(["node", "-e", script], cwd=base, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout)
 
 
 def test_gltf_validator_reports_no_errors(glb):

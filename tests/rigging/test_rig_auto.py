@@ -13,9 +13,9 @@ from facebasis.geometry.transfer import deformation_transfer
 from facebasis.rigging.crossval import cross_validate_alpha
 from facebasis.rigging.heldout import heldout_error
 from facebasis.rigging.generation import BlendshapeGenerator, generate_blendshapes
-from facebasis.rigging.problem import GenerationOptions, GenerationProblem
+from facebasis.rigging.problem import GenerationOptions
 from facebasis.rigging.synthetic import default_face_problem, make_person_problem
-from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
+from facebasis.defaults.face import EXCLUSIVE_PAIRS
 
 GRID = (0.001, 1000.0)
 

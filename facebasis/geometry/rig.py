@@ -78,9 +78,11 @@ class Rig:
     def n_shapes(self) -> int:
         return len(self.names)
 
-    def index(self, names: Sequence[str], what: str = "shape names") -> np.ndarray:
+    def index(self, names: Sequence[str], what: str = "shape names", params: dict | None = None) -> np.ndarray:
         """Indices of ``names``; :class:`RigError` naming the unknown ones with the nearest known name
-        of each (``jawOpem``: did you mean ``jawOpen``?), or the known ones when none is near."""
+        of each (``jawOpem``: did you mean ``jawOpen``?), or the known ones when none is near.
+        ``params`` ({placeholder: parameter name}) makes it a structured error whose ``what`` names a
+        caller's parameter (:class:`facebasis.errors.FacebasisError`)."""
         import difflib
 
         lookup = {s: i for i, s in enumerate(self.names)}
@@ -92,6 +94,9 @@ class Rig:
             else:
                 shown = list(self.names[:12]) + (["..."] if self.n_shapes > 12 else [])
                 hint = f"; expected names of {self.source} ({self.n_shapes}): {', '.join(shown)}"
+            if params:
+                raise RigError(what=what, expected=f"names of {self.source}'s {self.n_shapes} shapes",
+                               found=f"unknown blendshape names {unknown}", note=hint, params=params)
             raise RigError(f"{what}: unknown blendshape names {unknown}{hint}")
         return np.array([lookup[s] for s in names], dtype=np.int64)
 

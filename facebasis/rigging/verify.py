@@ -191,7 +191,7 @@ def verify_run(run_dir, tolerance: float = 1e-6, residual_tolerance: float = 1e-
                      dtype=np.int64).reshape(-1, 2)
     extra = tuple((str(a), str(b)) for a, b in check_pairs)
     for a, b in extra:
-        rig.index([a, b], what=f"--exclusive {a}:{b}")
+        rig.index([a, b], what=f"{{exclusive}} {a}:{b}", params={"exclusive": "exclusive"})
         if a == b:
             raise InputError(what=f"{{exclusive}} {a}:{b}", expected="two different shapes", found="one twice",
                              params={"exclusive": "exclusive"})

@@ -387,4 +387,5 @@ def detect_landmarks(path, detector: str | None = None, index: int = 0) -> tuple
                          params=_DETECTOR)
     h, w = frame.shape[:2]
     pts = np.clip(pts, 0, [w - 1, h - 1])   # a jaw point can fall a little outside a tight crop
-    return validate_landmarks(pts, f"{{detector}} {name} on {path}", expected=68, size=(w, h)), name
+    return validate_landmarks(pts, f"{{detector}} {name} on {path}", expected=68, size=(w, h),
+                              params=_DETECTOR), name

@@ -185,9 +185,8 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
         want = neutral or "neutral"
         hit = [p for p in files if p.name == want or p.stem == want]
         if not hit:
-            raise InputError(what=f"scans {src}",
-                             expected=f"a neutral scan named '{want}' (.obj/.ply) to register first",
-                             found=f"{', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}",
+            raise InputError(what=f"scans {src}", expected=f"a neutral scan named '{want}' (.obj/.ply) to register "
+                             f"first", found=f"{', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}",
                              note="; name it with {neutral}", params={"neutral": "neutral"})
         order = hit + [p for p in files if p is not hit[0]]
     elif neutral is not None and not src.is_dir():

@@ -82,11 +82,13 @@ class Rig:
     def n_shapes(self) -> int:
         return len(self.names)
 
-    def index(self, names: Sequence[str], what: str = "shape names", params: dict | None = None) -> np.ndarray:
+    def index(self, names: Sequence[str], what: str = "shape names", params: dict | None = None,
+              named: dict | None = None) -> np.ndarray:
         """Indices of ``names``; :class:`RigError` naming the unknown ones with the nearest known name
         of each (``jawOpem``: did you mean ``jawOpen``?), or the known ones when none is near.
         ``params`` ({placeholder: parameter name}) makes it a structured error whose ``what`` names a
-        caller's parameter (:class:`facebasis.errors.FacebasisError`)."""
+        caller's parameter (:class:`facebasis.errors.FacebasisError`); without it, ``named`` ({placeholder:
+        parameter name}) are the ``{name}`` placeholders in ``what`` (``"{exclusive}"``) of the same message."""
         import difflib
 
         lookup = {s: i for i, s in enumerate(self.names)}
@@ -101,7 +103,7 @@ class Rig:
             if params:
                 raise RigError(what=what, expected=f"names of {self.source}'s {self.n_shapes} shapes",
                                found=f"unknown blendshape names {unknown}", note=hint, params=params)
-            raise RigError(f"{what}: unknown blendshape names {unknown}{hint}")
+            raise RigError(f"{what}: unknown blendshape names {unknown}{hint}", params=named)
         return np.array([lookup[s] for s in names], dtype=np.int64)
 
     def shape(self, name: str) -> np.ndarray:

@@ -208,7 +208,7 @@ def resolve_pairs(rig: Rig, pairs, what: str = "{exclusive}") -> np.ndarray:
         return np.zeros((0, 2), np.int64)
     if all(isinstance(a, str) and isinstance(b, str) for a, b in P):
         flat = [n for ab in P for n in ab]
-        return rig.index(flat, what=what).reshape(-1, 2)
+        return rig.index(flat, what=what, named=named_params(what)).reshape(-1, 2)
     arr = np.asarray(P, np.int64).reshape(-1, 2)
     if arr.min() < 0 or arr.max() >= rig.n_shapes:
         raise InputError(what=what, expected=f"shape indices in [0, {rig.n_shapes})", found=arr.tolist(),

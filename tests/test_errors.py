@@ -118,3 +118,20 @@ def test_the_flag_check_sees_a_raise_a_log_and_a_default(tmp_path):
     p.write_text('def f(x, what="--x"):\n    log(f"use --y")\n    raise ValueError(f"--z: {x}")\n'
                  'def g():\n    return "--not-a-message"\n')
     assert [t for _, t in _flag_texts(p)] == ["--x", "use --y", "--z: "]
+
+
+def test_every_flag_the_cli_maps_to_is_an_option_of_a_command():
+    """FLAGS and the per-command overrides stay in step with the parsers (a renamed option fails here);
+    main() writes every command's errors through them (flags_of(command))."""
+    import argparse
+
+    from facebasis.cli import build_parser
+    from facebasis.cli.common import COMMAND_FLAGS, FLAGS, flags_of
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    options = {name: {s for a in p._actions for s in a.option_strings} for name, p in sub.choices.items()}
+    assert not [f for f in FLAGS.values() if not any(f in o for o in options.values())]
+    assert all(flag in options[command] for command, names in COMMAND_FLAGS.items() for flag in names.values())
+    for command in options:
+        assert set(flags_of(command)) >= set(FLAGS)
+    assert flags_of("landmarks")["index"] == "--frame" and flags_of("rig")["lam"] == "--lambda"

@@ -1,6 +1,5 @@
 """Retargeting's errors and hints name the library's parameters; the command line writes its flags (#25 item 5)."""
 
-import numpy as np
 import pytest
 
 from facebasis.capture.trackfile import write_capture

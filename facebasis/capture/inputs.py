@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facebasis.errors import InputError
+from facebasis.errors import InputError, parameter_error
 
 from .landmarks import read_landmarks, validate_landmarks
 from .trackfile import Capture
@@ -50,10 +50,11 @@ def check_capture_args(video, landmarks, detector, out, max_frames, fps):
     """Validate the arguments of :func:`capture` before any work; returns (source, landmarks, detector)."""
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
                                    or max_frames < 1):
-        raise InputError(f"--max-frames: expected a positive integer, found {max_frames}")
+        raise parameter_error("max_frames", "a positive integer", max_frames)
     if (landmarks is None) == (detector is None):
-        raise InputError("landmarks: expected exactly one of --landmarks FILE or --detector NAME, found "
-                         + ("both" if landmarks is not None else "neither"))
+        raise InputError(what="landmarks", expected="exactly one of {landmarks} FILE or {detector} NAME",
+                         found="both" if landmarks is not None else "neither",
+                         params={"landmarks": "landmarks", "detector": "detector"})
     if out is not None:
         o = Path(out)
         if o.exists() and not o.is_dir():

@@ -181,33 +181,40 @@ def read_landmarks(path: str | os.PathLike, expected: int | None = None) -> np.n
     return validate_landmarks(pts, source=f"landmark file {p}", expected=expected)
 
 
+def _source_error(params: dict | None, text: str) -> InputError:
+    """An error whose text may name library parameters (``"{detector} dlib on x.mp4"``, ``params``)."""
+    return InputError(text, params=params)
+
+
 def validate_landmarks(pts, source: str = "landmarks", expected: int | None = None,
-                       size: tuple[int, int] | None = None) -> np.ndarray:
-    """Check shape, count, finiteness and (if ``size=(width, height)``) that points lie in the frame."""
+                       size: tuple[int, int] | None = None, params: dict | None = None) -> np.ndarray:
+    """Check shape, count, finiteness and (if ``size=(width, height)``) that points lie in the frame;
+    ``params``: the library parameters ``source`` names as ``{name}`` (:mod:`facebasis.errors`)."""
     pts = np.asarray(pts, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 2:
-        raise InputError(f"{source}: expected an (L, 2) array of x, y, found shape {pts.shape}")
+        raise _source_error(params, f"{source}: expected an (L, 2) array of x, y, found shape {pts.shape}")
     if expected is not None and len(pts) != expected:
-        raise InputError(f"{source}: expected {expected} points, found {len(pts)}")
+        raise _source_error(params, f"{source}: expected {expected} points, found {len(pts)}")
     if len(pts) < 3:
-        raise InputError(f"{source}: expected at least 3 points, found {len(pts)}")
+        raise _source_error(params, f"{source}: expected at least 3 points, found {len(pts)}")
     if not np.all(np.isfinite(pts)):
-        raise InputError(f"{source}: expected finite coordinates, found NaN or infinity")
+        raise _source_error(params, f"{source}: expected finite coordinates, found NaN or infinity")
     # a face mesh needs points spanning an area: all-equal or collinear points are refused here, in
     # one line, instead of as Qhull's multi-line report from the triangulation
     c = pts - pts.mean(0)
     sv = np.linalg.svd(c, compute_uv=False)
     if sv[0] <= 1e-9 * max(1.0, float(np.abs(pts).max())):
-        raise InputError(f"{source}: expected points spanning an area, found all {len(pts)} points at "
+        raise _source_error(params, f"{source}: expected points spanning an area, found all {len(pts)} points at "
                          f"x={pts[0, 0]:g}, y={pts[0, 1]:g}")
     if sv[1] <= 1e-6 * sv[0]:
-        raise InputError(f"{source}: expected points spanning an area, found all {len(pts)} points on one line")
+        raise _source_error(params, f"{source}: expected points spanning an area, found all {len(pts)} points on "
+                                    "one line")
     if size is not None:
         w, h = size
         bad = np.flatnonzero((pts[:, 0] < 0) | (pts[:, 0] > w - 1) | (pts[:, 1] < 0) | (pts[:, 1] > h - 1))
         if len(bad):
             k = int(bad[0])
-            raise InputError(
+            raise _source_error(params,
                 f"{source}: expected points inside the {w} x {h} frame, found {len(bad)} outside "
                 f"(point {k} at x={pts[k, 0]:g}, y={pts[k, 1]:g})")
     return pts

@@ -344,8 +344,9 @@ class _Run:
         if self.lm0 is None:
             self.lm0 = self._timed("detect", det.detect, first)
             if self.lm0 is None:
-                raise InputError(f"--detector {getattr(det, 'name', det)}: expected a face on the first frame of "
-                                 f"{self.src.path}, found none")
+                raise InputError(what=f"{{detector}} {getattr(det, 'name', det)}",
+                                 expected=f"a face on the first frame of {self.src.path}", found="none",
+                                 params={"detector": "detector"})
         tracker = FaceTracker(first, self.lm0, self.options)
         noise = None
         if det is not None and self.observe:

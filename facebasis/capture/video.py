@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facebasis.errors import InputError
+from facebasis.errors import InputError, parameter_error
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 DEFAULT_FOLDER_FPS = 25.0
@@ -181,7 +181,7 @@ def open_frames(path: str | os.PathLike, fps: float | None = None) -> FrameSourc
     """
     p = Path(path)
     if fps is not None and not (np.isfinite(fps) and fps > 0):
-        raise InputError(f"--fps: expected a positive number, found {fps}")
+        raise parameter_error("fps", "a positive number", fps)
     if not p.exists():
         raise InputError(f"input {p}: expected a video file or an image folder, found nothing")
     if p.is_dir():
@@ -254,14 +254,14 @@ def read_frame(path: str | os.PathLike, index: int = 0) -> np.ndarray:
         Missing or unreadable input, or no frame ``index`` in it.
     """
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
-        raise InputError(f"--frame: expected a frame number >= 0, found {index!r}")
+        raise parameter_error("index", "a frame number >= 0", repr(index))
     p = Path(path)
     if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES:
         img = _read_image(p)
         if img is None:
             raise InputError(f"image {p}: cannot decode it as an image")
         if index != 0:
-            raise InputError(f"--frame: expected 0 for the single image {p}, found {index}")
+            raise parameter_error("index", f"0 for the single image {p}", index)
         return img
     src = open_frames(p)
     with warnings.catch_warnings():
@@ -269,5 +269,5 @@ def read_frame(path: str | os.PathLike, index: int = 0) -> np.ndarray:
         for i, fr in enumerate(src.frames(index + 1)):
             if i == index:
                 return fr
-    raise InputError(f"--frame: expected a frame number below the {src.stats.get('decoded', 0)} frames "
-                     f"decoded from {p}, found {index}")
+    raise parameter_error("index", f"a frame number below the {src.stats.get('decoded', 0)} frames decoded from {p}",
+                          index)

@@ -195,9 +195,9 @@ def _run(args, out, argv=None) -> int:
         with run_context(["facebasis", *(sys.argv[1:] if argv is None else argv)], input_paths(args, spec)):
             return int(args.func(args) or 0)
     except FacebasisError as exc:  # library parameters named in its fields are written as the flags
-        from .common import FLAGS
+        from .common import flags_of
 
-        print(f"error: {exc.renamed(FLAGS)}", file=sys.stderr)
+        print(f"error: {exc.renamed(flags_of(getattr(args, 'command', None)))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # SIGINT, and SIGTERM / SIGHUP as Terminated
         signum = signal_number(exc)

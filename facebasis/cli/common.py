@@ -13,7 +13,20 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "virtual_weight": "--virtual-weight", "virtual_mode": "--virtual-mode", "virtual_edges": "--virtual-edges",
          "ipopt": "--ipopt", "unobserved": "--unobserved", "exclusive": "--exclusive", "run_dir": "--resume",
          "template": "--template", "target": "--target", "more_examples": "--examples", "more_weights": "--weights",
-         "contact": "--contact"}
+         "contact": "--contact", "landmarks": "--landmarks", "detector": "--detector", "image": "--image",
+         "mesh": "--mesh", "rig": "--rig", "neutral": "--neutral", "exclude": "--exclude", "unit": "--unit",
+         "head": "--head", "ridge": "--ridge", "identity": "--identity", "first_frame_neutral": "--first-frame-neutral",
+         "region": "--region", "max_frames": "--max-frames", "fps": "--fps", "identity_basis": "--identity-basis",
+         "expression_basis": "--expression-basis", "expression_transfer": "--expression-transfer"}
+
+#: a command whose flag for a library parameter is not :data:`FLAGS`'s (``landmarks``' ``--frame`` is
+#: :func:`facebasis.capture.video.read_frame`'s ``index``)
+COMMAND_FLAGS = {"landmarks": {"index": "--frame"}}
+
+
+def flags_of(command: str | None) -> dict:
+    """{library parameter: flag} of one command: :data:`FLAGS` with the command's own names over it."""
+    return {**FLAGS, **COMMAND_FLAGS.get(command, {})}
 
 
 def add_rig_folder_args(p: argparse.ArgumentParser, *, template: str | None = "required",
@@ -33,15 +46,25 @@ def add_rig_folder_args(p: argparse.ArgumentParser, *, template: str | None = "r
                    help="ignore rig-folder files matching this glob (repeatable), e.g. 'identity*'" + exclude_note)
 
 
+def say(command: str | None):
+    """``print`` for a library's ``log``: a hint or warning that names library parameters
+    (:class:`facebasis.errors.NamedText`) is printed with the command's flags."""
+    from ..errors import renamed_text
+
+    names = flags_of(command)
+    return lambda text, *a, **k: print(renamed_text(text, names), *a, **k)
+
+
 def warn_rig_folder(rig) -> None:
     """One line on stderr for a rig folder that looks as it ships (identity modes, many shapes)."""
     import sys
 
+    from ..errors import renamed_text
     from ..geometry.rig import rig_folder_warning
 
     warning = rig_folder_warning(rig)
     if warning:
-        print(warning, file=sys.stderr)
+        print(renamed_text(warning, FLAGS), file=sys.stderr)
 
 
 def once(values, flag: str) -> list:

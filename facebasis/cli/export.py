@@ -61,7 +61,7 @@ def cmd_export(args) -> int:
     if folder is None:
         raise InputError("export: expected a rig folder (RIG_DIR or --template), found none")
     unit_scale(args.unit)
-    check_gltf_path(args.out)
+    check_gltf_path(args.out, "--out")
     rig = load_rig_folder(folder, args.neutral, args.exclude)
     warn_rig_folder(rig)
     t0 = time.perf_counter()

@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 from ..errors import InputError
-from .common import Once
+from .common import Once, say
 from .outputs import Outputs
 
 
@@ -25,7 +25,7 @@ def cmd_register(args) -> int:
         from ..capture.detect import available_detector, get_detector
 
         det = get_detector(args.detector or available_detector(), video=False)
-    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=print, detector=det,
+    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer)
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")

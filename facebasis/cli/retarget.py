@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .common import add_rig_folder_args
+from .common import add_rig_folder_args, say
 from .outputs import Outputs, capture_video
 
 _OUT = (("out", "folder", "--out"),)
@@ -19,7 +19,7 @@ def _capture_video(args):
 def cmd_animate2d(args) -> int:
     from ..retarget.pipeline import run_animate2d
 
-    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=print)
+    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=say(args.command))
     beside = f", beside {s['video_beside']}" if s["video_beside"] else ""
     print(f"animated {s['frames']} frames ({s['warp_ms_per_frame']:.1f} ms per frame warp{beside}) -> {args.out}")
     return 0
@@ -28,8 +28,8 @@ def cmd_animate2d(args) -> int:
 def cmd_animate3d(args) -> int:
     from ..retarget.pipeline import run_animate3d
 
-    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, head=args.head, log=print, unit=args.unit,
-                      neutral=args.neutral, exclude=args.exclude, preview=not args.no_preview)
+    s = run_animate3d(args.capture, args.out, args.mesh, args.landmarks, head=args.head, log=say(args.command),
+                      unit=args.unit, neutral=args.neutral, exclude=args.exclude, preview=not args.no_preview)
     print(f"drove {s['vertices']} vertices over {s['frames']} frames in {s['seconds']:.2f} s -> {args.out}")
     return 0
 
@@ -51,7 +51,7 @@ def cmd_retarget(args) -> int:
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      ridge=args.ridge, neutral=args.neutral,
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
-                     preview=not args.no_preview, log=print, animate_pose=not args.no_pose, unit=args.unit)
+                     preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0

@@ -33,7 +33,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from ..geometry.mesh import validate_mesh
 
 _EPS = 2.0 ** -53
@@ -239,9 +239,9 @@ def parse_region(text: str, n_vertices: int) -> np.ndarray:
     try:
         a, b = (int(t) for t in text.split(":"))
     except ValueError as exc:
-        raise InputError(f"--region: expected START:END vertex indices, found {text!r}") from exc
+        raise parameter_error("region", "START:END vertex indices", repr(text)) from exc
     if not (0 <= a < b <= n_vertices):
-        raise InputError(f"--region: expected 0 <= START < END <= {n_vertices}, found {a}:{b}")
+        raise parameter_error("region", f"0 <= START < END <= {n_vertices}", f"{a}:{b}")
     m = np.zeros(n_vertices, bool)
     m[a:b] = True
     return m

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write_bytes
-from ..errors import InputError
+from ..errors import InputError, named_params
 from .rig import Rig
 
 _FLOAT, _UINT = 5126, 5125
@@ -53,14 +53,16 @@ GLTF_SUFFIXES = (".glb", ".gltf")
 _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg"}
 
 
-def unit_scale(unit: str, what: str = "--unit") -> float:
-    """Metres per ``unit`` (``cm``, ``m`` or ``mm``); :class:`InputError` for anything else."""
+def unit_scale(unit: str, what: str = "{unit}") -> float:
+    """Metres per ``unit`` (``cm``, ``m`` or ``mm``); :class:`InputError` for anything else (``what``
+    names it, a ``{name}`` placeholder for a library parameter, see :mod:`facebasis.errors`)."""
     if unit not in UNITS:
-        raise InputError(f"{what}: expected one of {', '.join(UNITS)} (the source unit), found {unit!r}")
+        raise InputError(what=what, expected=f"one of {', '.join(UNITS)} (the source unit)", found=repr(unit),
+                         params=named_params(what))
     return UNITS[unit]
 
 
-def check_gltf_path(path, what: str = "--out") -> Path:
+def check_gltf_path(path, what: str = "path") -> Path:
     """A glTF output path: suffix ``.glb`` or ``.gltf`` and an existing parent folder, else
     :class:`InputError` naming the option and the path."""
     path = Path(path)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, NamedText, parameter_error
 from ..jsonio import read_json
 from .registration import Registration, RegistrationOptions, check_landmarks
 
@@ -77,17 +77,18 @@ def _bases(template: Path, T_V, T_F, identity_basis, expression_basis, log):
 
     auto_i, auto_e = template_bases(template, T_V) if None in (identity_basis, expression_basis) else ([], [])
     out = []
-    for given, auto, what, pattern in ((identity_basis, auto_i, "--identity-basis", "*"),
-                                       (expression_basis, auto_e, "--expression-basis", "*")):
+    for given, auto, what, pattern in ((identity_basis, auto_i, "identity_basis", "*"),
+                                       (expression_basis, auto_e, "expression_basis", "*")):
         if given is not None and str(given) == "none":
             out.append(None)
             continue
         if given is not None:
-            files, src = basis_files(given, pattern, what), str(given)
+            files, src = basis_files(given, pattern, "{" + what + "}"), str(given)
         elif auto:
             files, src = auto, str(template.parent)
-            log(f"{what.lstrip('-').replace('-', ' ')}: {len(files)} meshes found beside the template in {src} "
-                f"(FaceXModel layout: identity*.obj; pass {what} none to register without it)")
+            log(NamedText(f"{what.replace('_', ' ')}: {len(files)} meshes found beside the template in {src} "
+                          f"(FaceXModel layout: identity*.obj; pass {{{what}}} none to register without it)",
+                          {what: what}))
         else:
             out.append(None)
             continue
@@ -105,9 +106,10 @@ def _landmark_inputs(landmarks, detector, src: Path, files: list, T_V):
                          f"{'no landmarks' if landmarks is None else 'landmark files'}")
     if auto:
         if str(landmarks if isinstance(landmarks, str) else landmarks[0]) != "auto":
-            raise InputError(f"--landmarks: expected 'auto' or SCAN_LM.json TEMPLATE_LM.json, found {landmarks!r}")
+            raise parameter_error("landmarks", "'auto' or SCAN_LM.json TEMPLATE_LM.json", repr(landmarks))
         if detector is None:
-            raise InputError("--landmarks auto: expected a 2D face detector (--detector), found none")
+            raise InputError(what="{landmarks} auto", expected="a 2D face detector ({detector})", found="none",
+                             params={"landmarks": "landmarks", "detector": "detector"})
         det, s_lm = detector, "auto"
     elif landmarks is not None:
         s_path, t_path = landmarks
@@ -169,7 +171,7 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
 
     log = log or (lambda *a: None)
     if expression_transfer not in ("deformation", "linear"):
-        raise InputError(f"--expression-transfer: expected 'deformation' or 'linear', found {expression_transfer!r}")
+        raise parameter_error("expression_transfer", "'deformation' or 'linear'", repr(expression_transfer))
     src = Path(scan_or_dir)
     files = _scan_files(src)
     T_V, T_F = read_mesh(template)
@@ -183,12 +185,13 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
         want = neutral or "neutral"
         hit = [p for p in files if p.name == want or p.stem == want]
         if not hit:
-            raise InputError(f"scans {src}: expected a neutral scan named '{want}' (.obj/.ply) to register first, "
-                             f"found {', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}; "
-                             "name it with --neutral")
+            raise InputError(what=f"scans {src}", expected=f"a neutral scan named '{want}' (.obj/.ply) to register "
+                             f"first", found=f"{', '.join(p.name for p in files[:6])}{' ...' if len(files) > 6 else ''}",
+                             note="; name it with {neutral}", params={"neutral": "neutral"})
         order = hit + [p for p in files if p is not hit[0]]
     elif neutral is not None and not src.is_dir():
-        raise InputError(f"--neutral {neutral}: expected a folder of scans, found the single file {src}")
+        raise InputError(what=f"{{neutral}} {neutral}", expected="a folder of scans", found=f"the single file {src}",
+                         params={"neutral": "neutral"})
     scans = []
     for p in order:  # read and check every scan before any work
         V, F = read_mesh(p)

@@ -20,10 +20,14 @@ from typing import Sequence
 import numpy as np
 
 from ..atomic import atomic_directory
-from ..errors import RigError, TopologyError
+from ..errors import NamedText, RigError, TopologyError, named_params
 from .meshio import MESH_SUFFIXES, read_mesh, read_mesh_like, write_mesh
 from .mesh import validate_mesh, validate_vertices
 from .objlayout import read_obj_layout
+
+
+#: the parameter a rig folder's errors name (the command line writes ``--exclude``)
+_EXCLUDE = {"exclude": "exclude"}
 
 
 @dataclass(frozen=True)
@@ -78,11 +82,13 @@ class Rig:
     def n_shapes(self) -> int:
         return len(self.names)
 
-    def index(self, names: Sequence[str], what: str = "shape names", params: dict | None = None) -> np.ndarray:
+    def index(self, names: Sequence[str], what: str = "shape names", params: dict | None = None,
+              named: dict | None = None) -> np.ndarray:
         """Indices of ``names``; :class:`RigError` naming the unknown ones with the nearest known name
         of each (``jawOpem``: did you mean ``jawOpen``?), or the known ones when none is near.
         ``params`` ({placeholder: parameter name}) makes it a structured error whose ``what`` names a
-        caller's parameter (:class:`facebasis.errors.FacebasisError`)."""
+        caller's parameter (:class:`facebasis.errors.FacebasisError`); without it, ``named`` ({placeholder:
+        parameter name}) are the ``{name}`` placeholders in ``what`` (``"{exclusive}"``) of the same message."""
         import difflib
 
         lookup = {s: i for i, s in enumerate(self.names)}
@@ -97,7 +103,7 @@ class Rig:
             if params:
                 raise RigError(what=what, expected=f"names of {self.source}'s {self.n_shapes} shapes",
                                found=f"unknown blendshape names {unknown}", note=hint, params=params)
-            raise RigError(f"{what}: unknown blendshape names {unknown}{hint}")
+            raise RigError(f"{what}: unknown blendshape names {unknown}{hint}", params=named)
         return np.array([lookup[s] for s in names], dtype=np.int64)
 
     def shape(self, name: str) -> np.ndarray:
@@ -135,7 +141,7 @@ def _mesh_files(folder: Path, exclude: Sequence[str], excluded_later: Sequence[s
         raise RigError(f"rig folder {folder}: expected every mesh file to be readable, found "
                        f"{len(broken)} symbolic link{'s' if len(broken) > 1 else ''} leading nowhere ({shown}"
                        f"{' and more' if len(broken) > 3 else ''}); restore the target or remove the link, or "
-                       "leave it out with --exclude")
+                       "leave it out with {exclude}", params=_EXCLUDE)
     return [p for p in named if p.is_file()]
 
 
@@ -164,15 +170,17 @@ def load_rig_folder(
     if not neutral_path.is_file():
         raise RigError(
             f"rig folder {folder}: expected the neutral '{neutral}', found no such file "
-            f"(mesh files there: {[p.name for p in every][:10]}); name it with --neutral"
+            f"(mesh files there: {[p.name for p in every][:10]}); name it with {{neutral}}",
+            params={"neutral": "neutral"}
         )
     unmatched = [g for g in exclude if not any(_matches(p, g) for p in every)]
     if unmatched:  # a pattern may match a broken link left out on purpose
         links = [p for p in folder.iterdir() if p.is_symlink() and not p.exists()]
         unmatched = [g for g in unmatched if not any(_matches(p, g) for p in links)]
     if unmatched:  # a typo would otherwise keep the meshes the user meant to leave out
-        raise RigError(f"rig folder {folder}: expected every --exclude pattern to match a mesh file, found none for "
-                       f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})")
+        raise RigError(f"rig folder {folder}: expected every {{exclude}} pattern to match a mesh file, found none for "
+                       f"{', '.join(repr(g) for g in unmatched)} (mesh files there: {[p.name for p in every][:10]})",
+                       params=_EXCLUDE)
     V0, F0 = read_mesh(neutral_path, check_degenerate=True)
     names, deltas = [], []
     from ..progress import progress
@@ -198,11 +206,12 @@ IDENTITY_NAME = re.compile(r"^(identity|id_|id\d)", re.IGNORECASE)
 MANY_SHAPES = 100
 
 
-def rig_folder_warning(rig: Rig, option: str = "--exclude") -> str | None:
+def rig_folder_warning(rig: Rig, option: str = "{exclude}") -> str | None:
     """A one-line warning for a rig folder that is probably not only expressions, or None.
 
     Shape names that look like identity modes (:data:`IDENTITY_NAME`) are named (the first few and
-    how many) with the ``option`` glob that leaves them out; otherwise a folder of more than
+    how many) with the ``option`` glob that leaves them out (a :class:`facebasis.errors.NamedText`:
+    the command line writes ``{exclude}`` as ``--exclude``); otherwise a folder of more than
     :data:`MANY_SHAPES` shapes is said to be large. Solved as expressions, identity modes take
     every frame's face-shape difference (and the solve grows with the number of shapes).
     """
@@ -212,11 +221,11 @@ def rig_folder_warning(rig: Rig, option: str = "--exclude") -> str | None:
         globs = " ".join(f"{option} '{p}*'" for p in prefixes)
         shown = ", ".join(ident[:3]) + (f", ... ({len(ident)} of {rig.n_shapes} shapes)" if len(ident) > 3 else
                                           f" ({len(ident)} of {rig.n_shapes} shapes)")
-        return (f"warning: rig folder {rig.source}: shape names that look like identity modes, not expressions: "
-                f"{shown}; leave them out with {globs}")
+        return NamedText(f"warning: rig folder {rig.source}: shape names that look like identity modes, not "
+                         f"expressions: {shown}; leave them out with {globs}", named_params(option))
     if rig.n_shapes > MANY_SHAPES:
-        return (f"warning: rig folder {rig.source}: {rig.n_shapes} shapes (more than {MANY_SHAPES}), all solved as "
-                f"expressions; leave out what is not one with {option} GLOB")
+        return NamedText(f"warning: rig folder {rig.source}: {rig.n_shapes} shapes (more than {MANY_SHAPES}), all "
+                         f"solved as expressions; leave out what is not one with {option} GLOB", named_params(option))
     return None
 
 

@@ -157,8 +157,9 @@ class AutoLandmarks:
                 break
         found[: INNER[0]] = False
         if found.sum() < 3:
-            raise InputError(f"{name}: --landmarks auto expected a face on the template's front render (looking "
-                             f"along +z, y up), found {'no face' if not found.any() else f'{int(found.sum())} points'}")
+            raise InputError(f"{name}: {{landmarks}} auto expected a face on the template's front render (looking "
+                             f"along +z, y up), found {'no face' if not found.any() else f'{int(found.sum())} points'}",
+                             params={"landmarks": "landmarks"})
         from scipy.spatial import cKDTree
 
         self.index = np.full(68, -1, np.int64)

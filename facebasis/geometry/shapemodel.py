@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, named_params
 from .rigid import Similarity, _rotation_from_vector
 
 
@@ -62,8 +62,9 @@ class ShapeBasis:
         return ShapeBasis(self.names[:k], self.deltas[:k], self.source)
 
 
-def basis_files(folder: str | os.PathLike, pattern: str = "*", what: str = "--identity-basis") -> list[Path]:
-    """The mesh files of a basis folder matching ``pattern``, sorted by name.
+def basis_files(folder: str | os.PathLike, pattern: str = "*", what: str = "folder") -> list[Path]:
+    """The mesh files of a basis folder matching ``pattern``, sorted by name (``what`` names the folder
+    in errors, a ``{name}`` placeholder for a library parameter, see :mod:`facebasis.errors`).
 
     Raises
     ------
@@ -74,11 +75,12 @@ def basis_files(folder: str | os.PathLike, pattern: str = "*", what: str = "--id
 
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputError(f"{what} {folder}: expected a folder of meshes in the template's topology, found "
-                         f"{'a file' if folder.exists() else 'no such folder'}")
+        raise InputError(what=f"{what} {folder}", expected="a folder of meshes in the template's topology",
+                         found='a file' if folder.exists() else 'no such folder', params=named_params(what))
     files = sorted(p for p in folder.glob(pattern) if p.suffix.lower() in MESH_SUFFIXES and p.is_file())
     if not files:
-        raise InputError(f"{what} {folder}: expected .obj or .ply meshes in the template's topology, found none")
+        raise InputError(what=f"{what} {folder}", expected=".obj or .ply meshes in the template's topology",
+                         found="none", params=named_params(what))
     return files
 
 

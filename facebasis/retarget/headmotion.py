@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 
 #: 68-point iBUG landmarks an expression hardly moves: nose bridge and base, eye corners
 STABLE_68 = np.r_[27:36, 36, 39, 42, 45]
@@ -141,7 +141,7 @@ def parse_head_mode(value) -> str:
     if value is None:
         return "still"
     if not isinstance(value, str) or value.strip().lower() not in HEAD_MODES:
-        raise InputError(f"--head: expected one of {', '.join(HEAD_MODES)}, found {value!r}")
+        raise parameter_error("head", f"one of {', '.join(HEAD_MODES)}", repr(value))
     return value.strip().lower()
 
 

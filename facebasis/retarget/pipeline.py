@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
-from ..errors import InputError
+from ..errors import InputError, NamedText, parameter_error
 from ..capture.trackfile import OVERLAY_FILE, read_capture
 
 
@@ -45,16 +45,18 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     head = parse_head_mode(head)
     cap = read_capture(capture_dir)
     if (image is None) != (landmarks is None):
-        raise InputError("--image and --landmarks: expected both (a cartoon and its landmarks) or neither "
-                         "(the built-in cartoon), found only one")
+        raise InputError(what="{image} and {landmarks}", expected="both (a cartoon and its landmarks) or neither "
+                         "(the built-in cartoon)", found="only one",
+                         params={"image": "image", "landmarks": "landmarks"})
     if image is None:
         from ..defaults.cartoon import default_cartoon
 
         face = default_cartoon()
         img, pts, what = np.array(face.image), np.array(face.landmarks), "the built-in cartoon (68 iBUG landmarks)"
         if cap.n_landmarks != len(pts):
-            raise InputError(f"cartoon landmarks: expected {cap.n_landmarks} points (the capture's count), found "
-                             f"{len(pts)} on the built-in cartoon; give --image and --landmarks")
+            raise InputError(what="cartoon landmarks", expected=f"{cap.n_landmarks} points (the capture's count)",
+                             found=f"{len(pts)} on the built-in cartoon", note="; give {image} and {landmarks}",
+                             params={"image": "image", "landmarks": "landmarks"})
     else:
         pts = read_points2d(landmarks)
         if len(pts) != cap.n_landmarks:
@@ -138,11 +140,12 @@ def _mesh_or_rig_neutral(mesh, neutral: str = "neutral.obj", exclude=(), log=Non
         if warning:
             _log(log, warning)
         return rig.neutral, rig.faces
-    given = ([f"--exclude {' '.join(exclude)}"] if exclude else []) + \
-        ([f"--neutral {neutral}"] if neutral != "neutral.obj" else [])
+    given = ([f"{{exclude}} {' '.join(exclude)}"] if exclude else []) + \
+        ([f"{{neutral}} {neutral}"] if neutral != "neutral.obj" else [])
     if given:
-        raise InputError(f"{', '.join(given)}: expected a rig folder as --mesh, found "
-                         f"{'the built-in face' if mesh is None else f'the mesh file {mesh}'}")
+        raise InputError(what=", ".join(given), expected="a rig folder as {mesh}",
+                         found='the built-in face' if mesh is None else f'the mesh file {mesh}',
+                         params={"exclude": "exclude", "neutral": "neutral", "mesh": "mesh"})
     return read_mesh(mesh) if mesh is not None else None
 
 
@@ -177,8 +180,7 @@ def run_animate3d(capture_dir, out_dir, mesh=None, landmarks=None, head: str = "
         name = "the built-in face"
     else:
         if landmarks is None:
-            raise InputError(f"--landmarks: expected a JSON file of {cap.n_landmarks} vertex indices of {mesh}, "
-                             f"found none")
+            raise parameter_error("landmarks", f"a JSON file of {cap.n_landmarks} vertex indices of {mesh}", "none")
         V, F = mesh_vf
         layout = read_obj_layout(Path(mesh) / neutral if Path(mesh).is_dir() else mesh)
         idx = read_indices(landmarks)
@@ -228,8 +230,9 @@ def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_
     exclude = tuple(exclude or ())
     if rig is None or str(rig) == "default":
         if exclude:
-            raise InputError(f"--exclude: expected a rig folder (--rig RIG_DIR) to leave files out of, found the "
-                             f"built-in face (--exclude {' '.join(exclude)})")
+            raise InputError(what="{exclude}", expected="a rig folder ({rig} RIG_DIR) to leave files out of",
+                             found=f"the built-in face ({{exclude}} {' '.join(exclude)})",
+                             params={"exclude": "exclude", "rig": "rig"})
         from ..defaults.face import EXCLUSIVE_PAIRS, default_template
         from ..defaults.face_landmarks import face_landmarks
 
@@ -238,7 +241,7 @@ def load_retarget_rig(rig=None, landmarks=None, neutral: str = "neutral.obj", n_
         default_pairs = EXCLUSIVE_PAIRS
     else:
         if landmarks is None:
-            raise InputError(f"--landmarks: expected a JSON file of vertex indices of rig {rig}, found none")
+            raise parameter_error("landmarks", f"a JSON file of vertex indices of rig {rig}", "none")
         r = load_rig_folder(rig, neutral, exclude)
         idx = read_indices(landmarks)
         default_pairs = ()
@@ -307,7 +310,7 @@ def _parse_ridge(ridge):
     except (TypeError, ValueError):
         value = float("nan")
     if not (np.isfinite(value) and value >= 0):
-        raise InputError(f"--ridge: expected a finite number >= 0, found {ridge} (or 'auto', the default)")
+        raise parameter_error("ridge", "a finite number >= 0", ridge, note=" (or 'auto', the default)")
     return value
 
 
@@ -343,11 +346,12 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     from .rigdrive import IDENTITY_MODES
 
     if identity is not None and (not isinstance(identity, str) or identity not in IDENTITY_MODES):
-        raise InputError(f"--identity: expected one of {', '.join(IDENTITY_MODES)}, found {identity!r}")
+        raise parameter_error("identity", f"one of {', '.join(IDENTITY_MODES)}", repr(identity))
     try:
         identity = resolve_identity(identity, first_frame_neutral)
     except InputError as exc:
-        raise InputError(f"--identity and --first-frame-neutral: {str(exc).split(': ', 1)[1]}") from None
+        raise InputError(what="{identity} and {first_frame_neutral}", expected=exc.expected, found=exc.found,
+                         params={"identity": "identity", "first_frame_neutral": "first_frame_neutral"}) from None
     cap = read_capture(capture_dir)
     r, idx, default_pairs = load_retarget_rig(rig, landmarks, neutral, cap.n_landmarks, exclude, log)
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
@@ -381,9 +385,10 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         _log(log, f"landmark noise {noise_px:.2f} px ({result.noise:.3g} rig units, {100 * relative:.1f}% of the "
                   f"face's landmark radius): ridge {result.ridge:.3g}")
         if identity == "rig" and relative > FIRST_FRAME_HINT:
-            _log(log, "hint: the rig's neutral reproduces these landmarks poorly (the face's shape is not the "
-                      "rig's, or its landmarks are defined differently); --identity auto (the default) estimates "
-                      "the person's neutral from the capture, --identity first-frame takes frame 0 as it")
+            _log(log, NamedText("hint: the rig's neutral reproduces these landmarks poorly (the face's shape is "
+                                "not the rig's, or its landmarks are defined differently); {identity} auto (the "
+                                "default) estimates the person's neutral from the capture, {identity} first-frame "
+                                "takes frame 0 as it"))
     with atomic_directory(out_dir) as stage:
         if preview:
             extra.update(_write_previews(stage, capture_dir, cap, r.neutral, r.faces, r.names, result.weights,

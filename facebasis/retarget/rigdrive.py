@@ -64,7 +64,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, named_params
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
@@ -108,7 +108,7 @@ def resolve_identity(identity=None, first_frame_neutral=None) -> str:
         return DEFAULT_IDENTITY if identity is None else identity
     old = "first-frame" if first_frame_neutral else "rig"
     if identity is not None and identity != old:
-        raise InputError(f"identity: expected one setting, found identity={identity!r} and "
+        raise InputError(what="identity", expected="one setting", found=f"identity={identity!r} and "
                          f"first_frame_neutral={bool(first_frame_neutral)} (which means {old!r})")
     return old
 
@@ -200,17 +200,19 @@ def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str
     return idx
 
 
-def resolve_pairs(rig: Rig, pairs, what: str = "--exclusive") -> np.ndarray:
-    """Exclusive pairs given as names (a, b) or indices -> (p, 2) int64 (unknown names: RigError)."""
+def resolve_pairs(rig: Rig, pairs, what: str = "{exclusive}") -> np.ndarray:
+    """Exclusive pairs given as names (a, b) or indices -> (p, 2) int64 (unknown names: RigError;
+    ``what`` names them, a ``{name}`` placeholder for a library parameter, see :mod:`facebasis.errors`)."""
     P = list(pairs or ())
     if not P:
         return np.zeros((0, 2), np.int64)
     if all(isinstance(a, str) and isinstance(b, str) for a, b in P):
         flat = [n for ab in P for n in ab]
-        return rig.index(flat, what=what).reshape(-1, 2)
+        return rig.index(flat, what=what, named=named_params(what)).reshape(-1, 2)
     arr = np.asarray(P, np.int64).reshape(-1, 2)
     if arr.min() < 0 or arr.max() >= rig.n_shapes:
-        raise InputError(f"{what}: expected shape indices in [0, {rig.n_shapes}), found {arr.tolist()}")
+        raise InputError(what=what, expected=f"shape indices in [0, {rig.n_shapes})", found=arr.tolist(),
+                         params=named_params(what))
     return arr
 
 

@@ -127,12 +127,12 @@ def test_errors_before_work(tmp_path, folder, seq):
     cases = [
         ({"video": tmp_path / "missing.mp4", "landmarks": pts}, "found nothing"),
         ({"video": tmp_path / "empty", "landmarks": pts}, "expected png/jpg images, found none"),
-        ({"video": folder, "landmarks": pts, "max_frames": 0}, "--max-frames: expected a positive integer, found 0"),
+        ({"video": folder, "landmarks": pts, "max_frames": 0}, "^max_frames: expected a positive integer, found 0"),
         ({"video": folder, "landmarks": pts, "max_frames": -3}, "found -3"),
-        ({"video": folder}, "exactly one of --landmarks FILE or --detector NAME, found neither"),
+        ({"video": folder}, "exactly one of landmarks FILE or detector NAME, found neither"),
         ({"video": folder, "landmarks": pts, "detector": "dlib"}, "found both"),
         ({"video": folder, "landmarks": seq.landmarks[0] + 200}, "inside the 128 x 128 frame"),
-        ({"video": folder, "detector": "nope"}, "--detector: expected one of dlib"),
+        ({"video": folder, "detector": "nope"}, "^detector: expected one of dlib"),
     ]
     (tmp_path / "empty").mkdir()
     (tmp_path / "bad.mp4").write_bytes(b"\x00" * 1000)

@@ -114,7 +114,7 @@ def test_rig_folder_loads_and_excludes(tmp_path):
     assert "identity000" in rig2.names
     (tmp_path / "._shape0.obj").write_bytes(b"\x00\x05\x16\x07 macOS resource fork")  # hidden: not a shape
     assert load_rig_folder(tmp_path, exclude=["identity*"]).names == ("shape0", "shape1")
-    with pytest.raises(RigError, match=r"expected every --exclude pattern to match a mesh file, found none for "
+    with pytest.raises(RigError, match=r"expected every exclude pattern to match a mesh file, found none for "
                                        r"'identiy\*' \(mesh files there: \['identity000.obj', 'neutral.obj'"):
         load_rig_folder(tmp_path, exclude=["identity*", "identiy*"])
 

@@ -113,8 +113,12 @@ def test_register_files_auto_needs_a_detector_and_a_detector_needs_auto(tmp_path
 
     rig = default_template()
     write_mesh(tmp_path / "t.obj", rig.neutral, rig.faces)
-    with pytest.raises(InputError, match=r"--landmarks auto: expected a 2D face detector \(--detector\), found none"):
+    from facebasis.cli.common import flags_of
+
+    with pytest.raises(InputError, match=r"^landmarks auto: expected a 2D face detector \(detector\), found none") as ei:
         register_files(tmp_path / "t.obj", tmp_path / "t.obj", tmp_path / "o", landmarks="auto")
+    assert str(ei.value.renamed(flags_of("register"))) == ("--landmarks auto: expected a 2D face detector (--detector), "
+                                                          "found none")
     with pytest.raises(InputError, match="detector: expected together with landmarks 'auto', found no landmarks"):
         register_files(tmp_path / "t.obj", tmp_path / "t.obj", tmp_path / "o", detector=object())
     assert not (tmp_path / "o").exists()

@@ -139,16 +139,20 @@ def test_a_basis_of_another_topology_is_refused_naming_the_file(files):
 
 
 def test_an_empty_basis_folder_is_refused(files):
-    with pytest.raises(InputError, match=r"--expression-basis .*empty: expected .obj or .ply meshes in the "
+    from facebasis.cli.common import flags_of
+
+    with pytest.raises(InputError, match=r"^expression_basis .*empty: expected .obj or .ply meshes in the "
                                          r"template's topology, found none"):
         register_files(files / "scan.obj", files / "t.obj", files / "out", expression_basis=files / "empty")
-    with pytest.raises(InputError, match=r"--identity-basis .*nothing: expected a folder of meshes .* found no such"):
+    with pytest.raises(InputError, match=r"^identity_basis .*nothing: expected a folder of meshes .* found no such") \
+            as ei:
         register_files(files / "scan.obj", files / "t.obj", files / "out", identity_basis=files / "nothing")
+    assert str(ei.value.renamed(flags_of("register"))).startswith("--identity-basis ")  # the command line's flag
     assert not (files / "out").exists()
 
 
 def test_an_unknown_expression_transfer_is_refused(files):
-    with pytest.raises(InputError, match="--expression-transfer: expected 'deformation' or 'linear', found 'affine'"):
+    with pytest.raises(InputError, match="^expression_transfer: expected 'deformation' or 'linear', found 'affine'"):
         register_files(files / "scan.obj", files / "t.obj", files / "out", expression_transfer="affine")
     assert not (files / "out").exists()
 

@@ -110,6 +110,7 @@ def test_identity_values_and_the_older_spelling():
 
 def test_cli_identity_option(person, tmp_path, capsys):
     from facebasis.cli import main
+    from facebasis.cli.common import flags_of
 
     rig, idx, X, perp, base, cap = person
     folder = tmp_path / "capture"
@@ -131,8 +132,10 @@ def test_cli_identity_option(person, tmp_path, capsys):
                  "--first-frame-neutral"]) == 2
     assert "--first-frame-neutral: expected no other --identity, found --identity rig" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
-    with pytest.raises(InputError, match="--identity and --first-frame-neutral"):
+    with pytest.raises(InputError, match=r"^identity and first_frame_neutral: expected one setting, found "
+                                         r"identity='rig' and first_frame_neutral=True") as ei:
         run_retarget(folder, tmp_path / "bad", identity="rig", first_frame_neutral=True)
+    assert str(ei.value.renamed(flags_of("retarget"))).startswith("--identity and --first-frame-neutral: expected")
 
 
 def test_span_basis_adds_no_direction_outside_a_rank_deficient_span():

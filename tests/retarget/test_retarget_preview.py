@@ -10,6 +10,8 @@ from facebasis.capture.trackfile import Capture, write_capture
 from facebasis.defaults.face import EXCLUSIVE_PAIRS, default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.geometry.meshio import write_mesh
+from facebasis.cli.common import FLAGS
+from facebasis.errors import renamed_text
 from facebasis.geometry.rig import Rig, rig_folder_warning, write_rig_folder
 from facebasis.geometry.raster import rasterize_mesh
 from facebasis.retarget.rigdrive import RigRetargeter
@@ -148,12 +150,16 @@ def test_many_shapes_warning():
     V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
     F = np.array([[0, 1, 2]])
     many = Rig(V, F, tuple(f"shape{i}" for i in range(101)), np.zeros((101, 3, 3)), source="big")
-    w = rig_folder_warning(many)
-    assert w.startswith("warning: rig folder big: 101 shapes (more than 100)") and "--exclude GLOB" in w
+    w = rig_folder_warning(many)   # the library's parameter; the command line's flag by renaming
+    assert w.startswith("warning: rig folder big: 101 shapes (more than 100)") and w.endswith(" with exclude GLOB")
+    assert renamed_text(w, FLAGS).endswith(" with --exclude GLOB") and "--" not in w
     assert rig_folder_warning(Rig(V, F, ("a", "b"), np.zeros((2, 3, 3)), source="small")) is None
     ids = Rig(V, F, ("jawOpen", "id_00", "id_01", "ID7"), np.zeros((4, 3, 3)), source="ids")
     w = rig_folder_warning(ids)
+    assert "id_00, id_01, ID7 (3 of 4 shapes)" in w and "exclude 'id_*'" in w and "--" not in w
+    w = renamed_text(w, FLAGS)
     assert "id_00, id_01, ID7 (3 of 4 shapes)" in w and "--exclude 'id_*'" in w and "--exclude 'id*'" in w
+    assert rig_folder_warning(ids, option="--skip").endswith("leave them out with --skip 'id*' --skip 'id_*'")
 
 
 def test_animate3d_rig_folder_neutral_exclude_and_preview(shipped, capsys):

@@ -37,12 +37,16 @@ import numpy as np
 from ..errors import InputError, MeshError
 from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
+from .normalstage import NormalStageOptions, normal_displacement
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 
 #: A scan whose size (bounding-box diagonal) differs from the template's by more than this factor
 #: (either way) is refused as being in other units.
 UNIT_RATIO = 4.0
+
+#: The stages that may follow a shape-model fit (:attr:`RegistrationOptions.after_model`).
+AFTER_MODEL = ("nricp", "normal", "nricp+normal")
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,10 @@ class RegistrationOptions:
         has an identity basis
     expression_fit : the expression fit of an expression scan, when expressions are given
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
+    after_model : the stage after either fit: ``"nricp"`` (free non-rigid ICP, ``nricp_after_model``),
+        ``"normal"`` (offsets along the fitted model's normals only, :mod:`.normalstage`: cannot
+        slide) or ``"nricp+normal"`` (both, in this order)
+    normal_stage : the normal stage's options
     auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
         non-rigid stage's landmark weights
     expression_max : upper bound of the expression weights (lower bound 0). Above 1: a person's
@@ -78,6 +86,12 @@ class RegistrationOptions:
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1
+    after_model: str = "nricp"
+    normal_stage: NormalStageOptions = field(default_factory=NormalStageOptions)
+
+    def __post_init__(self):
+        if self.after_model not in AFTER_MODEL:
+            raise InputError(f"after_model: expected one of {', '.join(AFTER_MODEL)}, found {self.after_model!r}")
 
 
 @dataclass(frozen=True)
@@ -352,7 +366,7 @@ class Registration:
         if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
             opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
                                                                    for w in opts.landmark_weight))
-        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h)
+        res = self._refine(P, surface_t, opts, lm_idx, lm_t, h, model is not None)
         Xt = res.vertices
         if self.skin is not None:  # the other parts have no scan surface: keep them where the fit put them
             Xt = P.copy()
@@ -362,6 +376,17 @@ class Registration:
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
                                   lm_err, time.perf_counter() - t0, model, kind, names,
                                   (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
+
+    def _refine(self, P, surface_t, opts, lm_idx, lm_t, h, after_model: bool):
+        """The last stage: non-rigid ICP, or after a model fit the stage ``options.after_model``."""
+        how = self.options.after_model if after_model else "nricp"
+        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h) if how != "normal" else None
+        if how == "nricp":
+            return res
+        R = P if res is None else res.vertices
+        out = normal_displacement(R, self.nricp.vertex_normals(R), self.nricp.L, surface_t, h,
+                                  self.options.normal_stage, use=self.skin)
+        return dataclasses.replace(out, iterations=out.iterations + (0 if res is None else res.iterations))
 
     def _auto_landmarks(self, P, surface_t, F, h, from_start: bool):
         """Landmarks found on the scan (:mod:`.scanlandmarks`), seen from the template's front, as

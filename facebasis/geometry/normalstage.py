@@ -78,7 +78,7 @@ class NormalStageResult:
     ----------
     vertices : (n, 3) ``p + d m``
     offset : (n,) ``d`` (the surface's units)
-    distance : (n,) distance of each vertex to its nearest scan vertex after the last round
+    distance : (n,) distance of each vertex to the scan's triangles (exact closest points)
     no_surface : (n,) bool, vertices without a data term in the last round
     iterations : rounds run
     """
@@ -114,15 +114,12 @@ def normal_displacement(P: np.ndarray, normals: np.ndarray, laplacian: sp.spmatr
     dmax, lim = options.max_distance * h, options.max_offset * h
     base = options.smoothness * sp.csr_matrix(laplacian) + sp.identity(n, format="csr") * 1e-6
     d = np.zeros(n)
-    dist = np.full(n, np.inf)
     ok = np.zeros(n, bool)
     for _ in range(options.iterations):
         X = P + d[:, None] * normals
         U, N, du, rim = surface.nearest_planes(X[use], True, dmax)
         a = (N * normals[use]).sum(1)
         keep = (~rim) & (du <= dmax) & (a >= cos_max)
-        dist[:] = np.inf
-        dist[use] = du
         ok[:] = False
         ok[use[keep]] = True
         i = use[keep]
@@ -134,4 +131,4 @@ def normal_displacement(P: np.ndarray, normals: np.ndarray, laplacian: sp.spmatr
         M = (base + sp.diags(diag)).tocsc()
         d = np.clip(spla.spsolve(M, rhs), -lim, lim)
     X = P + d[:, None] * normals
-    return NormalStageResult(X, d, dist, ~ok, options.iterations)
+    return NormalStageResult(X, d, surface.closest(X)[2], ~ok, options.iterations)

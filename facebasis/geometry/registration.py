@@ -240,6 +240,11 @@ class Registration:
         labels = connected_components(self.F, len(self.V))
         count = np.bincount(labels)
         self.skin = np.flatnonzero(labels == np.argmax(count)) if len(count) > 1 else None
+        if self.skin is not None:  # the skin alone, for the non-rigid stage after a model fit
+            self._skin_where = np.full(len(self.V), -1)
+            self._skin_where[self.skin] = np.arange(len(self.skin))
+            self._skin_icp = NonRigidICP(self._skin_where[self.F[labels[self.F[:, 0]] == np.argmax(count)]],
+                                         len(self.skin))
         for basis, what in ((identity, "identity basis"), (expressions, "expression basis")):
             if basis is not None and basis.deltas.shape[1:] != self.V.shape:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
@@ -380,13 +385,27 @@ class Registration:
     def _refine(self, P, surface_t, opts, lm_idx, lm_t, h, after_model: bool):
         """The last stage: non-rigid ICP, or after a model fit the stage ``options.after_model``."""
         how = self.options.after_model if after_model else "nricp"
-        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h) if how != "normal" else None
+        res = None
+        if how != "normal":
+            res = (self._skin_fit(P, surface_t, opts, lm_idx, lm_t, h) if after_model and self.skin is not None
+                   else self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h))
         if how == "nricp":
             return res
         R = P if res is None else res.vertices
         out = normal_displacement(R, self.nricp.vertex_normals(R), self.nricp.L, surface_t, h,
                                   self.options.normal_stage, use=self.skin)
         return dataclasses.replace(out, iterations=out.iterations + (0 if res is None else res.iterations))
+
+    def _skin_fit(self, P, surface_t, opts, lm_idx, lm_t, h):
+        """The non-rigid stage on the skin part alone, after a model fit (the other parts have no scan
+        surface and keep the fit's places: FaceXModel's head, 14062 of 26719 vertices); a result over
+        all vertices, the others ``no_surface`` with their nearest scan vertex's distance."""
+        where, on = self._skin_where, None if lm_idx is None else self._skin_where[lm_idx] >= 0
+        lm = (where[lm_idx[on]], lm_t[on]) if on is not None and on.any() else (None, None)
+        r = self._skin_icp.fit(P[self.skin], surface_t, opts, *lm, h=h)
+        X, dist, no = P.copy(), surface_t.tree.query(P)[0], np.ones(len(P), bool)
+        X[self.skin], dist[self.skin], no[self.skin] = r.vertices, r.distance, r.no_surface
+        return dataclasses.replace(r, vertices=X, distance=dist, no_surface=no)
 
     def _auto_landmarks(self, P, surface_t, F, h, from_start: bool):
         """Landmarks found on the scan (:mod:`.scanlandmarks`), seen from the template's front, as

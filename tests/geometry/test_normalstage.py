@@ -102,3 +102,24 @@ def test_cli_after_model_bad_value_and_repeat(tmp_path, capsys):
         main(base + ["--after-model", "normal", "--after-model", "nricp"])
     assert e.value.code == 2 and "--after-model" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("after", ["nricp", "normal"])
+def test_a_template_of_several_parts_refines_its_skin_and_keeps_the_other_parts_at_the_fit(after):
+    from test_shapemodel import as_scan, face, modes
+
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    Q, H = grid_sheet(5, 4, z=float(T[:, 2].min()) - 3.0, size=2.0)  # a second part behind the head: no scan
+    T2, F2 = np.concatenate([T, Q]), np.concatenate([F, H + len(T)])
+    D = modes(T)
+    c = np.array([0.8, -1.2, 0.5, 1.5, -0.3, 0.9])
+    person = T + np.tensordot(c, D, 1)
+    S, G, R, t = as_scan(person, F, seed=5)
+    D2 = np.concatenate([D, np.zeros((6, len(Q), 3))], 1)
+    reg = Registration(T2, F2, RegistrationOptions(after_model=after), identity=ShapeBasis(tuple("abcdef"), D2, "t"))
+    res = reg.register(S, G)
+    assert np.allclose(res.vertices[len(T):], res.similarity.apply(res.model.vertices)[len(T):])
+    assert res.no_surface[len(T):].all() and np.isfinite(res.distance).all()
+    err = np.linalg.norm(res.vertices[: len(T)] - (person @ R.T + t), axis=1)
+    assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.03

@@ -45,8 +45,7 @@ from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 #: (either way) is refused as being in other units.
 UNIT_RATIO = 4.0
 
-#: The stages that may follow a shape-model fit (:attr:`RegistrationOptions.after_model`).
-AFTER_MODEL = ("nricp", "normal", "nricp+normal")
+AFTER_MODEL = ("nricp", "normal", "nricp+normal")  #: the stages that may follow a shape-model fit
 
 
 @dataclass(frozen=True)
@@ -240,11 +239,11 @@ class Registration:
         labels = connected_components(self.F, len(self.V))
         count = np.bincount(labels)
         self.skin = np.flatnonzero(labels == np.argmax(count)) if len(count) > 1 else None
-        if self.skin is not None:  # the skin alone, for the non-rigid stage after a model fit
+        if self.skin is not None:  # the skin alone: rigid stage; non-rigid stage after a model fit
             self._skin_where = np.full(len(self.V), -1)
             self._skin_where[self.skin] = np.arange(len(self.skin))
-            self._skin_icp = NonRigidICP(self._skin_where[self.F[labels[self.F[:, 0]] == np.argmax(count)]],
-                                         len(self.skin))
+            Fs = self._skin_where[self.F[labels[self.F[:, 0]] == np.argmax(count)]]
+            self._skin_icp = NonRigidICP(Fs, len(self.skin))
         for basis, what in ((identity, "identity basis"), (expressions, "expression basis")):
             if basis is not None and basis.deltas.shape[1:] != self.V.shape:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
@@ -346,12 +345,14 @@ class Registration:
         # from the person's registered neutral (same scanner, same units): a rigid motion, no scale
         rigid = self.options.rigid if start is None else dataclasses.replace(self.options.rigid, scale=False)
         guess = umeyama(P[self.landmarks], lm_pts, scale=rigid.scale) if lm_pts is not None else None
-        sim, score = align_similarity(P, self.F, V, F, rigid, start=guess)
+        # several parts: the skin aligns (the scan has no eyeballs, teeth: FaceXModel whole landed 6.5 cm off)
+        Ps, Fs = (P, self.F) if self.skin is None else (P[self.skin], self._skin_icp.F)
+        sim, score = align_similarity(Ps, Fs, V, F, rigid, start=guess)
         surface = ScanSurface(V, F)
         with_model = (start is None and self.identity is not None) or expressions is not None
         if not with_model:  # (a model fit refines the pose itself, with the shape)
             rng = np.random.default_rng(rigid.seed)
-            sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
+            sub = Ps[rng.choice(len(Ps), min(len(Ps), 4000), replace=False)]
             sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations,
                                                rigid.keep_template, scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
@@ -397,9 +398,8 @@ class Registration:
         return dataclasses.replace(out, iterations=out.iterations + (0 if res is None else res.iterations))
 
     def _skin_fit(self, P, surface_t, opts, lm_idx, lm_t, h):
-        """The non-rigid stage on the skin part alone, after a model fit (the other parts have no scan
-        surface and keep the fit's places: FaceXModel's head, 14062 of 26719 vertices); a result over
-        all vertices, the others ``no_surface`` with their nearest scan vertex's distance."""
+        """The non-rigid stage on the skin alone after a model fit (the other parts keep the fit's places:
+        FaceXModel 14062 of 26719 vertices); the others ``no_surface``, at their nearest scan vertex's distance."""
         where, on = self._skin_where, None if lm_idx is None else self._skin_where[lm_idx] >= 0
         lm = (where[lm_idx[on]], lm_t[on]) if on is not None and on.any() else (None, None)
         r = self._skin_icp.fit(P[self.skin], surface_t, opts, *lm, h=h)

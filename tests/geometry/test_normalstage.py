@@ -123,3 +123,35 @@ def test_a_template_of_several_parts_refines_its_skin_and_keeps_the_other_parts_
     assert res.no_surface[len(T):].all() and np.isfinite(res.distance).all()
     err = np.linalg.norm(res.vertices[: len(T)] - (person @ R.T + t), axis=1)
     assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.03
+
+
+def test_cli_after_model_normal_registers_through_the_identity_basis(tmp_path, capsys):
+    import json
+
+    from test_shapemodel import as_scan, face, modes
+
+    from facebasis.geometry.meshio import write_mesh
+
+    rig = face()
+    D = modes(rig.neutral, 3)
+    (tmp_path / "basis").mkdir()
+    write_mesh(tmp_path / "t.obj", rig.neutral, rig.faces)
+    for k in range(3):
+        write_mesh(tmp_path / "basis" / f"id{k}.obj", rig.neutral + D[k], rig.faces)
+    c = np.array([1.0, -0.5, 0.7])
+    S, G, _, _ = as_scan(rig.neutral + np.tensordot(c, D, 1), rig.faces, seed=6)
+    write_mesh(tmp_path / "p.obj", S, G)
+    rc = main(["register", str(tmp_path / "p.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(tmp_path / "o"),
+               "--identity-basis", str(tmp_path / "basis"), "--after-model", "normal"])
+    assert rc == 0, capsys.readouterr()
+    rep = json.loads((tmp_path / "o" / "p.json").read_text())
+    assert np.allclose([rep["identity"]["coefficients"][f"id{k}"] for k in range(3)], c, atol=0.05)
+    assert rep["residual"]["median"] < 0.01
+
+
+def test_cli_expression_transfer_given_once_is_accepted(tmp_path, capsys):
+    # (an option with a default under the given-once rule refused any value given once)
+    rc = main(["register", str(tmp_path / "missing.obj"), "--template", str(tmp_path / "t.obj"), "--out",
+               str(tmp_path / "o"), "--expression-transfer", "linear"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "given twice" not in err and "missing.obj" in err

@@ -25,9 +25,12 @@ def cmd_register(args) -> int:
         from ..capture.detect import available_detector, get_detector
 
         det = get_detector(args.detector or available_detector(), video=False)
-    s = register_files(args.scans, args.template, args.out, lm, args.neutral, log=say(args.command), detector=det,
+    from ..geometry.registration import RegistrationOptions
+
+    opts = RegistrationOptions(after_model=args.after_model or "nricp")
+    s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
-                       expression_transfer=args.expression_transfer)
+                       expression_transfer=args.expression_transfer or "deformation")
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
 
@@ -50,9 +53,14 @@ def register(subparsers) -> None:
                         "'auto': found on each scan and on the template by a face detector on a front render "
                         "(the template looks along +z, y up), lifted onto the surface; the number found and their "
                         "residual are reported per scan")
-    p.add_argument("--expression-transfer", default="deformation", action=Once, choices=("deformation", "linear"),
+    p.add_argument("--expression-transfer", default=None, action=Once, choices=("deformation", "linear"),
                    help="how the expression basis is carried onto the person's registered neutral: deformation "
                         "transfer (default) or the template's displacements as they are (ICT-FaceKit's own convention)")
+    p.add_argument("--after-model", default=None, action=Once, choices=("nricp", "normal", "nricp+normal"),
+                   help="the stage after the identity or expression fit: free non-rigid ICP (default), offsets along "
+                        "the fitted model's normals only (cannot slide along the skin: a person's detail outside "
+                        "the identity space without moving correspondence), or both in this order; without a basis "
+                        "the non-rigid ICP runs as always")
     p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
                    help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",

@@ -37,12 +37,15 @@ import numpy as np
 from ..errors import InputError, MeshError
 from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
+from .normalstage import NormalStageOptions, normal_displacement
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 
 #: A scan whose size (bounding-box diagonal) differs from the template's by more than this factor
 #: (either way) is refused as being in other units.
 UNIT_RATIO = 4.0
+
+AFTER_MODEL = ("nricp", "normal", "nricp+normal")  #: the stages that may follow a shape-model fit
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,10 @@ class RegistrationOptions:
         has an identity basis
     expression_fit : the expression fit of an expression scan, when expressions are given
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
+    after_model : the stage after either fit: ``"nricp"`` (free non-rigid ICP, ``nricp_after_model``),
+        ``"normal"`` (offsets along the fitted model's normals only, :mod:`.normalstage`: cannot
+        slide) or ``"nricp+normal"`` (both, in this order)
+    normal_stage : the normal stage's options
     auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
         non-rigid stage's landmark weights
     expression_max : upper bound of the expression weights (lower bound 0). Above 1: a person's
@@ -78,6 +85,12 @@ class RegistrationOptions:
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1
+    after_model: str = "nricp"
+    normal_stage: NormalStageOptions = field(default_factory=NormalStageOptions)
+
+    def __post_init__(self):
+        if self.after_model not in AFTER_MODEL:
+            raise InputError(f"after_model: expected one of {', '.join(AFTER_MODEL)}, found {self.after_model!r}")
 
 
 @dataclass(frozen=True)
@@ -226,6 +239,11 @@ class Registration:
         labels = connected_components(self.F, len(self.V))
         count = np.bincount(labels)
         self.skin = np.flatnonzero(labels == np.argmax(count)) if len(count) > 1 else None
+        if self.skin is not None:  # the skin alone: rigid stage; non-rigid stage after a model fit
+            self._skin_where = np.full(len(self.V), -1)
+            self._skin_where[self.skin] = np.arange(len(self.skin))
+            Fs = self._skin_where[self.F[labels[self.F[:, 0]] == np.argmax(count)]]
+            self._skin_icp = NonRigidICP(Fs, len(self.skin))
         for basis, what in ((identity, "identity basis"), (expressions, "expression basis")):
             if basis is not None and basis.deltas.shape[1:] != self.V.shape:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
@@ -327,12 +345,14 @@ class Registration:
         # from the person's registered neutral (same scanner, same units): a rigid motion, no scale
         rigid = self.options.rigid if start is None else dataclasses.replace(self.options.rigid, scale=False)
         guess = umeyama(P[self.landmarks], lm_pts, scale=rigid.scale) if lm_pts is not None else None
-        sim, score = align_similarity(P, self.F, V, F, rigid, start=guess)
+        # several parts: the skin aligns (the scan has no eyeballs, teeth: FaceXModel whole landed 6.5 cm off)
+        Ps, Fs = (P, self.F) if self.skin is None else (P[self.skin], self._skin_icp.F)
+        sim, score = align_similarity(Ps, Fs, V, F, rigid, start=guess)
         surface = ScanSurface(V, F)
         with_model = (start is None and self.identity is not None) or expressions is not None
         if not with_model:  # (a model fit refines the pose itself, with the shape)
             rng = np.random.default_rng(rigid.seed)
-            sub = P[rng.choice(len(P), min(len(P), 4000), replace=False)]
+            sub = Ps[rng.choice(len(Ps), min(len(Ps), 4000), replace=False)]
             sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations,
                                                rigid.keep_template, scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
@@ -352,7 +372,7 @@ class Registration:
         if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
             opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
                                                                    for w in opts.landmark_weight))
-        res = self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h)
+        res = self._refine(P, surface_t, opts, lm_idx, lm_t, h, model is not None)
         Xt = res.vertices
         if self.skin is not None:  # the other parts have no scan surface: keep them where the fit put them
             Xt = P.copy()
@@ -362,6 +382,30 @@ class Registration:
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
                                   lm_err, time.perf_counter() - t0, model, kind, names,
                                   (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
+
+    def _refine(self, P, surface_t, opts, lm_idx, lm_t, h, after_model: bool):
+        """The last stage: non-rigid ICP, or after a model fit the stage ``options.after_model``."""
+        how = self.options.after_model if after_model else "nricp"
+        res = None
+        if how != "normal":
+            res = (self._skin_fit(P, surface_t, opts, lm_idx, lm_t, h) if after_model and self.skin is not None
+                   else self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h))
+        if how == "nricp":
+            return res
+        R = P if res is None else res.vertices
+        out = normal_displacement(R, self.nricp.vertex_normals(R), self.nricp.L, surface_t, h,
+                                  self.options.normal_stage, use=self.skin)
+        return dataclasses.replace(out, iterations=out.iterations + (0 if res is None else res.iterations))
+
+    def _skin_fit(self, P, surface_t, opts, lm_idx, lm_t, h):
+        """The non-rigid stage on the skin alone after a model fit (the other parts keep the fit's places:
+        FaceXModel 14062 of 26719 vertices); the others ``no_surface``, at their nearest scan vertex's distance."""
+        where, on = self._skin_where, None if lm_idx is None else self._skin_where[lm_idx] >= 0
+        lm = (where[lm_idx[on]], lm_t[on]) if on is not None and on.any() else (None, None)
+        r = self._skin_icp.fit(P[self.skin], surface_t, opts, *lm, h=h)
+        X, dist, no = P.copy(), surface_t.tree.query(P)[0], np.ones(len(P), bool)
+        X[self.skin], dist[self.skin], no[self.skin] = r.vertices, r.distance, r.no_surface
+        return dataclasses.replace(r, vertices=X, distance=dist, no_surface=no)
 
     def _auto_landmarks(self, P, surface_t, F, h, from_start: bool):
         """Landmarks found on the scan (:mod:`.scanlandmarks`), seen from the template's front, as

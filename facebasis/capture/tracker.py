@@ -36,7 +36,7 @@ from .lips import (
     follow_outer_lip,
     similarity_factor,
 )
-from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_align
+from .lk import build_pyramid, lk_track, local_affine, local_affine_factor, patch_grid, template_align
 from .meshtrack import MeshRefiner, prepare_image
 from .options import TrackerOptions
 from .particle import CondensationFilter, neighbour_weights, sample
@@ -122,6 +122,7 @@ class FaceTracker:
         self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
         self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
+        self._affine = local_affine_factor(self.mesh.vertices, np.arange(L), self.mesh.spacing)   # frame 0's part
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
         self.lk_motion = np.zeros_like(lm)   # LK's motion of the landmarks in the last frame
@@ -187,7 +188,7 @@ class FaceTracker:
 
     def _correct_drift(self, lk, prep):
         """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
-        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing, self._affine)
         p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
                                  iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
                                  affine_damping=DRIFT_DAMPING)

@@ -29,11 +29,8 @@ def draw_overlay(frame: np.ndarray, vertices: np.ndarray, faces: np.ndarray, lan
 
     img = np.ascontiguousarray(frame, dtype=np.uint8).copy()
     sh = 4  # fixed-point sub-pixel bits for smooth lines
-    f = np.asarray(faces)
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    e = np.unique(e, axis=0)                      # each mesh edge drawn once (not once per triangle)
-    seg = np.round(vertices[e] * (1 << sh)).astype(np.int32)  # (E, 2, 2)
-    cv2.polylines(img, list(seg), False, (60, 220, 60), 1, cv2.LINE_AA, sh)
+    tri = np.round(vertices[faces] * (1 << sh)).astype(np.int32)  # (M, 3, 2)
+    cv2.polylines(img, list(tri), True, (60, 220, 60), 1, cv2.LINE_AA, sh)
     lost = np.zeros(len(landmarks), bool) if lost is None else np.asarray(lost, bool)
     r = 2 * (1 << sh)
     diamond = np.array([[0, -r], [r, 0], [0, r], [-r, 0]], np.int32)

@@ -85,7 +85,31 @@ def lk_track(prev_pyr, next_pyr, points: np.ndarray, windows: np.ndarray, levels
     return LKResult(pts_out, ok, fb)
 
 
-def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: float) -> np.ndarray:
+def local_affine_factor(V0: np.ndarray, centres: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame-0 part of :func:`local_affine`, computed once per take.
+
+    Returns
+    -------
+    wd0 : ndarray, shape (P, 2, N)
+        ``w_ij d0_ij`` (transposed for batched products).
+    Minv : ndarray, shape (P, 2, 2)
+        Inverse of ``sum_j w_ij d0_ij d0_ij^T`` (identity where singular).
+    ok : ndarray, shape (P,) bool
+        Where that matrix is invertible.
+    """
+    d0 = V0[None, :, :] - V0[centres][:, None, :]          # (P, N, 2)
+    w = np.exp(-(d0 ** 2).sum(-1) / (2 * sigma ** 2))      # (P, N)
+    wd0 = np.ascontiguousarray((w[..., None] * d0).transpose(0, 2, 1))   # (P, 2, N): batched products
+    M = wd0 @ d0
+    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+    ok = det > 1e-9 * np.maximum(M[:, 0, 0] + M[:, 1, 1], 1e-12) ** 2
+    Minv = np.stack([np.stack([M[:, 1, 1], -M[:, 0, 1]], -1), np.stack([-M[:, 1, 0], M[:, 0, 0]], -1)], 1)
+    Minv = Minv / np.where(ok, det, 1.0)[:, None, None]
+    return wd0, np.where(ok[:, None, None], Minv, np.eye(2)[None]), ok
+
+
+def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: float,
+                 factor: tuple | None = None) -> np.ndarray:
     """Per-point linear part of the local affine map from frame 0 to frame t, ``(P, 2, 2)``.
 
     Weighted least squares over all mesh vertices with Gaussian weights of their frame-0 distance to
@@ -100,18 +124,13 @@ def local_affine(V0: np.ndarray, Vt: np.ndarray, centres: np.ndarray, sigma: flo
         Vertex indices of the points.
     sigma : float
         Width of the weights (pixels, frame 0).
+    factor : tuple, optional
+        :func:`local_affine_factor` of ``(V0, centres, sigma)``: everything that depends on frame 0
+        only, so a tracker computes it once and each frame costs two batched products.
     """
-    d0 = V0[None, :, :] - V0[centres][:, None, :]          # (P, N, 2)
-    dt = Vt[None, :, :] - Vt[centres][:, None, :]
-    w = np.exp(-(d0 ** 2).sum(-1) / (2 * sigma ** 2))      # (P, N)
-    wd0 = (w[..., None] * d0).transpose(0, 2, 1)          # (P, 2, N): batched products
-    M = wd0 @ d0
-    Nm = (wd0 @ dt).transpose(0, 2, 1)
-    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
-    ok = det > 1e-9 * np.maximum(M[:, 0, 0] + M[:, 1, 1], 1e-12) ** 2
-    Minv = np.stack([np.stack([M[:, 1, 1], -M[:, 0, 1]], -1), np.stack([-M[:, 1, 0], M[:, 0, 0]], -1)], 1)
-    Minv = Minv / np.where(ok, det, 1.0)[:, None, None]
-    A = Nm @ Minv
+    wd0, Minv, ok = local_affine_factor(V0, centres, sigma) if factor is None else factor
+    dt = Vt[None, :, :] - Vt[centres][:, None, :]          # (P, N, 2)
+    A = (wd0 @ dt).transpose(0, 2, 1) @ Minv
     return np.where(ok[:, None, None], A, np.eye(2)[None])
 
 

@@ -140,6 +140,7 @@ class MeshRefiner:
         self.bary = barycentric_samples(options.subdivision)  # (K, 3)
         self.agg = residual_groups(self.bary, options.residuals_per_triangle)  # (K, G)
         self.K = cotangent_laplacian(V0, F, clip_negative=True).tocsr()  # E_smooth operator, eq. 4
+        self._Kd = self.K.toarray() if 2 * self.N <= DENSE_MAX else None    # dense copy for the dense path
         a0 = np.abs(_areas(V0, self.F))
         self.mean_area = float(a0.mean())
         # residual g of triangle T from its samples' image gradient: (K, G * 3) factors agg[k, g] b_kj
@@ -196,9 +197,12 @@ class MeshRefiner:
         col[U] = np.arange(len(U))
         n = 2 * len(U)
         dense = n <= DENSE_MAX
-        K2 = sp.kron(self.K[U][:, U], sp.eye(2), format="csr")  # (2U, 2U), unknowns ordered (u, coordinate)
-        if dense:
-            K2 = K2.toarray()
+        if dense and self._Kd is not None:   # (2U, 2U), unknowns ordered (u, coordinate)
+            K2 = np.kron(self._Kd[np.ix_(U, U)], np.eye(2))
+        else:
+            K2 = sp.kron(self.K[U][:, U], sp.eye(2), format="csr")
+            if dense:
+                K2 = K2.toarray()
         lam = o.smooth_weight
         G = self.agg.shape[1]
         dof, pair, pair_ok = _jacobian_pattern(col[F])

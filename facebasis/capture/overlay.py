@@ -45,7 +45,11 @@ def draw_overlay(frame: np.ndarray, vertices: np.ndarray, faces: np.ndarray, lan
 class OverlayWriter:
     """Stream RGB frames into an H.264 (libx264; MPEG-4 part 2 as fallback) mp4 with PyAV.
 
-    Odd frame sizes are padded by one pixel (yuv420p needs even sizes).
+    Odd frame sizes are padded by one pixel (yuv420p needs even sizes). The overlay is a preview:
+    x264's ``ultrafast`` preset (CRF 23) encodes a 360 x 288 frame in about a third of ``veryfast``'s
+    CPU time for a file about three times larger, and the RGB -> YUV 4:2:0 conversion (BT.601,
+    limited range, as FFmpeg's default) is done by OpenCV's vectorised ``cvtColor`` instead of
+    PyAV's per-frame swscale reformat.
     """
 
     def __init__(self, path: str | os.PathLike, fps: float, size: tuple[int, int]):
@@ -58,7 +62,7 @@ class OverlayWriter:
         rate = Fraction(fps).limit_denominator(1001)
         try:
             self.stream = self.container.add_stream("libx264", rate=rate)
-            self.stream.options = {"crf": "23", "preset": "veryfast"}
+            self.stream.options = {"crf": "23", "preset": "ultrafast"}
         except Exception:  # noqa: BLE001 - encoder not in this FFmpeg build
             self.stream = self.container.add_stream("mpeg4", rate=rate)
         self.w, self.h = size[0] + size[0] % 2, size[1] + size[1] % 2
@@ -70,7 +74,10 @@ class OverlayWriter:
 
         if rgb.shape[1] != self.w or rgb.shape[0] != self.h:
             rgb = np.pad(rgb, ((0, self.h - rgb.shape[0]), (0, self.w - rgb.shape[1]), (0, 0)), mode="edge")
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        import cv2
+
+        yuv = cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2YUV_I420)   # (3H/2, W)
+        frame = av.VideoFrame.from_ndarray(yuv, format="yuv420p")
         for packet in self.stream.encode(frame):
             self.container.mux(packet)
 

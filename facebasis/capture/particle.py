@@ -91,15 +91,13 @@ def sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
     import cv2
 
     shape = pts.shape[:-1]
-    flat = pts.reshape(-1, 2).astype(np.float32)
+    flat = pts.reshape(-1, 2)
     n = len(flat)
     cols = 1024 if n > 1024 else max(n, 1)
     pad = (-n) % cols
-    if pad:
-        flat = np.concatenate([flat, np.zeros((pad, 2), np.float32)])
-    mx = flat[:, 0].reshape(-1, cols)
-    my = flat[:, 1].reshape(-1, cols)
-    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    xy = np.zeros((n + pad, 2), np.float32)      # one interleaved CV_32FC2 map: no x / y split copies
+    xy[:n] = flat
+    out = cv2.remap(img, xy.reshape(-1, cols, 2), None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return out.ravel()[:n].reshape(shape)
 
 
@@ -166,9 +164,14 @@ class CondensationFilter:
         self.estimate[idx] = points
 
     def appearance(self, image: np.ndarray, pts: np.ndarray) -> np.ndarray:
-        """Best NCC of the patches at ``pts (L, ..., 2)`` against the two templates -> ``(L, ...)``."""
-        patches = sample(image, pts[..., None, :] + self.offsets)
-        return np.maximum(ncc(patches, self.template0), ncc(patches, self.template))
+        """Best NCC of the patches at ``pts (L, ..., 2)`` against the two templates -> ``(L, ...)``.
+
+        The patches are normalised once and compared with both (normalised) templates at once."""
+        a = _normalise(sample(image, pts[..., None, :] + self.offsets))        # (L, ..., S)
+        t = _normalise(np.stack([self.template0, self.template], 1))           # (L, 2, S)
+        L, S = t.shape[0], t.shape[-1]
+        c = a.reshape(L, -1, S) @ t.transpose(0, 2, 1)                        # (L, K, 2): batched products
+        return c.max(-1).reshape(a.shape[:-1])
 
     def step(self, image: np.ndarray, measured: np.ndarray, measured_ok: np.ndarray,
              detections: np.ndarray | None = None, detection_sigma: np.ndarray | None = None,

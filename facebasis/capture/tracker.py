@@ -36,7 +36,7 @@ from .lips import (
     follow_outer_lip,
     similarity_factor,
 )
-from .lk import build_pyramid, lk_track, local_affine, patch_grid, template_align
+from .lk import build_pyramid, lk_track, local_affine, local_affine_factor, patch_grid, template_align
 from .meshtrack import MeshRefiner, prepare_image
 from .options import TrackerOptions
 from .particle import CondensationFilter, neighbour_weights, sample
@@ -95,7 +95,7 @@ class FaceTracker:
         if not (np.isfinite(options.outlier_distance) and options.outlier_distance >= 0):
             raise InputError(f"outlier_distance: expected a number >= 0 (face widths; 0 = off), "
                              f"found {options.outlier_distance!r}")
-        gray = to_gray(first_frame)
+        gray, gray8 = _grays(first_frame)
         h, w = gray.shape
         lm = validate_landmarks(landmarks, "landmarks", size=(w, h))
         self.size = (w, h)
@@ -113,7 +113,7 @@ class FaceTracker:
         self._outer0 = lm[48:60].copy() if len(self._inner) else None    # outer lip of frame 0
         self._offset = lm[self._inner] - lm[self._partner]              # lip thickness, frame 0's axes
         self.filter = CondensationFilter(gray, lm, self.scale, options.filter) if options.use_filter else None
-        self._pyr = build_pyramid(_u8(gray), self._maxwin, options.lk_levels)
+        self._pyr = build_pyramid(gray8, self._maxwin, options.lk_levels)
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
         self._lost_prev = np.zeros(L, bool)
@@ -122,6 +122,7 @@ class FaceTracker:
         self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
         self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
         self._V = self.mesh.vertices.copy()
+        self._affine = local_affine_factor(self.mesh.vertices, np.arange(L), self.mesh.spacing)   # frame 0's part
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
         self.lk_motion = np.zeros_like(lm)   # LK's motion of the landmarks in the last frame
@@ -187,7 +188,7 @@ class FaceTracker:
 
     def _correct_drift(self, lk, prep):
         """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
-        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing)
+        A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing, self._affine)
         p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
                                  iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
                                  affine_damping=DRIFT_DAMPING)
@@ -222,11 +223,11 @@ class FaceTracker:
         FrameResult
         """
         t0 = time.perf_counter()
-        gray = to_gray(frame)
+        gray, gray8 = _grays(frame)
         if (gray.shape[1], gray.shape[0]) != self.size:
             raise InputError(f"frame: expected size {self.size[0]} x {self.size[1]}, "
                              f"found {gray.shape[1]} x {gray.shape[0]}")
-        pyr = build_pyramid(_u8(gray), self._maxwin, self.opt.lk_levels)
+        pyr = build_pyramid(gray8, self._maxwin, self.opt.lk_levels)
         lk = self._predict_failed(lk_track(self._pyr, pyr, self._lm, self.windows, self.opt.lk_levels,
                                            self.opt.fb_threshold * self.scale))
         prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
@@ -261,6 +262,23 @@ class FaceTracker:
 
 def _u8(gray: np.ndarray) -> np.ndarray:
     return np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def _grays(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The frame as grey float32 in ``[0, 1]`` (:func:`to_gray`) and as grey uint8 for LK.
+
+    A uint8 RGB frame's uint8 grey is OpenCV's conversion itself (rounding ``to_gray``'s result back
+    to 0-255 gives exactly it), so it is not recomputed from the float image."""
+    a = np.asarray(frame)
+    if a.dtype == np.uint8 and a.ndim == 3:
+        import cv2
+
+        g8 = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY)
+        return g8.astype(np.float32) / 255.0, g8
+    if a.dtype == np.uint8 and a.ndim == 2:
+        return a.astype(np.float32) / 255.0, np.ascontiguousarray(a)
+    gray = to_gray(a)
+    return gray, _u8(gray)
 
 
 def capture(video, landmarks=None, detector=None, out=None, max_frames: int | None = None,

@@ -148,7 +148,14 @@ def describe_pairs(pairs, given: int) -> str:
 
 class Once(argparse.Action):
     """An option that takes several values once (e.g. a pair of files); given twice it is an error,
-    never a silent overwrite of the first."""
+    never a silent overwrite of the first. It takes no default (a default would read as the option
+    given once already): declare ``default=None`` and apply the default after parsing."""
+
+    def __init__(self, option_strings, dest, default=None, **kwargs):
+        if default is not None:
+            raise ValueError(f"{'/'.join(option_strings)}: a Once option cannot have a default (found {default!r}): "
+                             "given once, it would be refused as given twice")
+        super().__init__(option_strings, dest, default=None, **kwargs)
 
     def __call__(self, parser, namespace, values, option_string=None):
         if getattr(namespace, self.dest, None) is not None:

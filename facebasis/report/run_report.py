@@ -136,7 +136,13 @@ def crossval_figure(run_dir, path: Path, formats=FORMATS) -> list[Path]:
     fig, ax = plt.subplots(figsize=(COLUMN, 2.6))
     for f, row in enumerate(cv.get("fold_errors", [])):
         ax.plot(grid, row, "-", color="0.75", lw=0.8, label="one fold" if f == 0 else None)
-    ax.plot(grid, errors, "o-", color="tab:blue", label="pooled over the folds")
+    # coarse candidates (--cv-candidates coarse) score the path on the first folds only; the chosen
+    # alpha's error over all folds is chosen_error
+    coarse = cv.get("coarse_folds")
+    pooled = f"pooled over the first {coarse} folds" if coarse else "pooled over the folds"
+    ax.plot(grid, errors, "o-", color="tab:blue", label=pooled)
+    if coarse and cv.get("chosen_error") is not None:
+        ax.plot([best], [float(cv["chosen_error"])], "s", color="tab:red", ms=5, label="chosen, all folds")
     ax.axvline(best, color="tab:red", ls="--", lw=1, label=f"chosen alpha {best:g}")
     ax.set_xscale("log")
     ax.set_xlabel(unit("final alpha (schedule 5a -> a)", DIMENSIONLESS))

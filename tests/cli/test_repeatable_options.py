@@ -235,3 +235,12 @@ def test_a_value_repeated_within_a_repeatable_option_is_kept_once_and_said(tmp_p
     assert "note: --contact-exclude jawOpen given more than once: used once" in captured.err
     assert "(excluded: jawOpen, mouthPucker)" in captured.out
     assert sorted(json.loads((tmp_path / "c" / "contact.json").read_text())["excluded"]) == ["jawOpen", "mouthPucker"]
+
+
+def test_a_once_option_cannot_be_declared_with_a_default():
+    """Given once, an option with a default would read as given twice: the declaration is refused."""
+    p = argparse.ArgumentParser()
+    with pytest.raises(ValueError, match="--pair: a Once option cannot have a default"):
+        p.add_argument("--pair", nargs=2, action=Once, default=["a", "b"])
+    p.add_argument("--other", nargs=2, action=Once)
+    assert p.parse_args([]).other is None and p.parse_args(["--other", "x", "y"]).other == ["x", "y"]

@@ -254,3 +254,23 @@ def test_history_splits_the_weight_objective_into_fit_and_prior(rig_run):
     assert last["weight_prior"] == pytest.approx(last["lam"] * float(((x - xt) ** 2).sum()), rel=1e-6)
     for h in history["iterations"]:
         assert 0.0 <= h["weight_prior"] <= h["weight_objective"]
+
+
+def test_crossval_figure_says_which_folds_the_curve_pools(tmp_path, monkeypatch):
+    """A coarse cross-validation (--cv-candidates coarse) scores the path on its first folds only:
+    the curve's label says how many, and the chosen alpha's error over all folds is its own mark."""
+    import json
+
+    from facebasis.report import run_report
+
+    seen = []
+    monkeypatch.setattr(run_report, "save", lambda fig, path, formats: seen.append(fig) or [])
+    cv = {"grid": [0.01, 0.1, 1.0], "errors": [0.3, 0.2, 0.25], "best_alpha": 0.1}
+    (tmp_path / "crossval.json").write_text(json.dumps(cv))
+    run_report.crossval_figure(tmp_path, tmp_path / "cv")
+    (tmp_path / "crossval.json").write_text(json.dumps({**cv, "coarse_folds": 2, "chosen_error": 0.21}))
+    run_report.crossval_figure(tmp_path, tmp_path / "cv")
+    labels = [[t.get_text() for t in fig.legends[0].get_texts()] if fig.legends else
+              [t.get_text() for t in fig.axes[0].get_legend().get_texts()] for fig in seen]
+    assert "pooled over the folds" in labels[0] and not any("all folds" in s for s in labels[0])
+    assert "pooled over the first 2 folds" in labels[1] and "chosen, all folds" in labels[1]

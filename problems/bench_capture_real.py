@@ -22,7 +22,6 @@ repository).
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 
@@ -150,12 +149,11 @@ def main(argv=None) -> int:
     rows: list = []
     for clip in clips:
         run_clip(clip, None if a.cache is None else Path(a.cache), a.max_frames, rows)
+    from facebasis.report.tables import write_dict_csv
+
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_dict_csv(out, rows)
     print(f"\nwrote {out}")
     return 0
 

@@ -15,7 +15,6 @@ Writes ``reports/capture/speed.csv`` with the load average at the start of each 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import resource
 import subprocess
@@ -119,12 +118,11 @@ def main(argv=None) -> int:
         else:
             command(clip, a.detector, rows)
     track_1024(a.frames, rows)
+    from facebasis.report.tables import write_dict_csv
+
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_dict_csv(out, rows)
     print(f"wrote {out}")
     return 0
 

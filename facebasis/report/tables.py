@@ -33,6 +33,13 @@ def dict_rows(rows, columns) -> list[list]:
     return [[r.get(c, "") for c in columns] for r in rows]
 
 
+def write_dict_csv(path: Path, rows) -> Path:
+    """Rows of dicts (the first row's keys are the columns) as CSV at ``path``, written atomically."""
+    columns = list(rows[0])
+    atomic_write_bytes(path, csv_table(columns, dict_rows(rows, columns)).encode())
+    return Path(path)
+
+
 def write_table(out: Path, name: str, header, rows, floatfmt="{:.4g}") -> list[Path]:
     """``name.csv`` and ``name.md`` in the folder ``out``; returns both paths."""
     out = Path(out)
@@ -42,4 +49,4 @@ def write_table(out: Path, name: str, header, rows, floatfmt="{:.4g}") -> list[P
     return paths
 
 
-__all__ = ["markdown_table", "csv_table", "dict_rows", "write_table"]
+__all__ = ["markdown_table", "csv_table", "dict_rows", "write_dict_csv", "write_table"]

@@ -161,3 +161,17 @@ def test_generation_problem_rejects_mismatched_virtual_edges():
     other = VirtualEdges(np.array([[0, 1]]), np.ones(1), np.ones(1), 10, 1.0, 2.0, 4, 0.0)
     with pytest.raises(InputError, match=f"virtual_edges: expected edges for {p.template.n_vertices} vertices, found 10"):
         dataclasses.replace(p, virtual_edges=other)
+
+
+def test_write_dict_csv_reads_back_as_written(tmp_path):
+    """Benchmarks write their rows of dicts through one writer: header from the first row's keys,
+    ``None`` as an empty cell, read back unchanged by csv.DictReader."""
+    import csv
+
+    from facebasis.report.tables import write_dict_csv
+
+    rows = [{"clip": "a, b", "mean_px": 2.5, "note": None}, {"clip": "c", "mean_px": 3, "note": "x"}]
+    path = write_dict_csv(tmp_path / "t.csv", rows)
+    with path.open(newline="") as fh:
+        back = list(csv.DictReader(fh))
+    assert back == [{"clip": "a, b", "mean_px": "2.5", "note": ""}, {"clip": "c", "mean_px": "3", "note": "x"}]

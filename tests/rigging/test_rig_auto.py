@@ -264,6 +264,20 @@ def test_fold_deletion_closed_form_equals_explicit_refits():
         fold_deletion_rows(X, RT, AT, w, 0.3, np.zeros(9))
 
 
+def assert_is_the_final_schedule_run(p, opts, res):
+    """``res`` (an ``--alpha auto`` result) is a plain run of its cross-validation's final schedule:
+    the history numbers and follows that schedule, and the rig and weights equal a fresh run of it.
+    Returns the fresh run's generator (alpha fixed), for recomputing fold errors."""
+    sched = res.crossval.final_schedule(opts)
+    assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))
+    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
+    gen = BlendshapeGenerator(p, dataclasses.replace(opts, alpha=(1.0, 1.0)))
+    ref = gen.run(schedule=sched)
+    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
+    assert np.array_equal(ref.weights, res.weights)
+    return gen
+
+
 def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
     """"deletion": one path on all training expressions; a candidate's fold error is
     the held-out error of its last basis step solved without the fold, at the path's weights; the
@@ -281,13 +295,7 @@ def test_deletion_scores_fold_deletion_of_the_path_and_returns_the_path_rig():
     cv = res.crossval
     assert shown == [(len(res.history), len(res.history))]  # the final alternation, numbered after the path's
     assert cv.candidates == "deletion" and cv.path == grid and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
-    sched = cv.final_schedule(opts)
-    assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))
-    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
-    gen = BlendshapeGenerator(p, dataclasses.replace(opts, alpha=(1.0, 1.0)))
-    ref = gen.run(schedule=sched)
-    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
-    assert np.array_equal(ref.weights, res.weights)
+    gen = assert_is_the_final_schedule_run(p, opts, res)
     # the fold error of every scored candidate, recomputed explicitly
     for c, a in enumerate(cv.grid):
         full = list(cv.path)
@@ -335,13 +343,7 @@ def test_coarse_path_scores_fold_deletion_and_returns_the_path_rig():
     res = generate_blendshapes(p, opts)
     cv = res.crossval
     assert cv.candidates == "coarse" and cv.coarse_folds == 2 and res.options.alpha == (5 * cv.best_alpha, cv.best_alpha)
-    sched = cv.final_schedule(opts)
-    assert [h.iteration for h in res.history] == list(range(1, len(sched) + 1))
-    assert np.allclose([(h.alpha, h.lam) for h in res.history], sched, rtol=1e-15, atol=0)
-    gen = BlendshapeGenerator(p, dataclasses.replace(opts, alpha=(1.0, 1.0)))
-    ref = gen.run(schedule=sched)
-    assert np.abs(ref.rig.deltas - res.rig.deltas).max() <= 1e-12 * np.abs(ref.rig.deltas).max()
-    assert np.array_equal(ref.weights, res.weights)
+    gen = assert_is_the_final_schedule_run(p, opts, res)
     # the path went through every other candidate from the top; the route ends at the choice
     assert set(cv.path) <= set(grid) and cv.path[-1] == 10.0 and cv.path[0] == cv.best_alpha
     full = [c for c in range(len(cv.grid)) if all(f[c] == f[c] for f in cv.fold_errors)]

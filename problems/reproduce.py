@@ -134,7 +134,7 @@ RECIPES: tuple[Recipe, ...] = (
            (f"{PY} problems.grid_alpha_lambda --m 20 --seed 1 --heldout 200",), data=("ict",),
            script="problems/grid_alpha_lambda.py"),
     Recipe("grid-edge", "`--alpha auto` with the grid extended below 0.003 (m = 20, seed 0)",
-           ("examples_study/grid_edge_m20_seed0.json",), ("PYTHONPATH=. {python} problems/grid_edge.py 20 0",),
+           ("examples_study/grid_edge_m20_seed0.json",), (f"{PY} problems.grid_edge 20 0",),
            data=("ict",), script="problems/grid_edge.py"),
     Recipe("resume", "`rig --resume` against a run on all expressions from the start (seed 0)",
            ("examples_study/resume_seed0.json",),

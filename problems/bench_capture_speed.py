@@ -1,11 +1,17 @@
-"""Capture speed: ``python -m problems.bench_capture_speed [--clip VIDEO] [--frames N]``.
+"""Capture speed: ``python -m problems.bench_capture_speed [--clip VIDEO] [--frames N] [--repeat R]``.
 
 1. The whole command, ``facebasis capture VIDEO --detector mediapipe --out DIR --no-progress`` in a
-   child process (imports, decoding, detection, tracking, mesh, overlay and file writing included):
-   wall time and the child's CPU time (user + system, from ``getrusage``) per frame. ``--clip``
-   defaults to the shared cap12 clip resized to 360 x 288 (written to a temporary folder, never into
-   the repository). The CPU figure is the one to compare on a loaded machine: the wall time grows
-   with the other processes' load.
+   child process (imports, decoding, detection, tracking, mesh, overlay and file writing included),
+   as shipped (decoding and MediaPipe ahead of the tracker and the overlay behind it in background
+   threads, :mod:`facebasis.capture.pipeline`) and, as the baseline row, with ``capture(...,
+   threads=False)`` (every stage in one thread; same outputs): wall time, the child's CPU time
+   (user + system, from ``getrusage``) and the wall time less what the child's main thread spent
+   waiting in the run queue for a core taken by another process (``/proc/PID/task/PID/schedstat``),
+   per frame. ``--clip`` defaults to the shared cap12 clip resized to 360 x 288 (written to a
+   temporary folder, never into the repository). On a loaded machine the wall time grows with the
+   other processes' load; the CPU time and the wall less the run-queue wait much less so (the
+   latter stays an over-estimate under load: a thread asleep waiting for the GIL or for a frame
+   from a background thread that waits for a core is still counted).
 2. Landmarks + mesh at 1024 x 768 (``FaceTracker.track`` on the astronaut sequence upscaled; frame
    making excluded): wall and process CPU time per frame, per stage.
 
@@ -91,7 +97,7 @@ def command(clip: Path, detector: str, rows: list, threads: bool = True) -> None
         return
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     queued = sched[1] if sched else float("nan")
-    stages = next((ln for ln in out.splitlines() if ln.startswith("time:")), "")
+    stages = next((ln for ln in out.splitlines() if ln.startswith("time:")), "").split(" (")[0]
     what = f"capture --detector {detector} (whole command{'' if threads else ', threads off'})"
     print(f"{what} on {clip.name} ({n} frames): wall {wall / n * 1e3:.1f} ms/frame, CPU {cpu / n * 1e3:.1f} "
           f"ms/frame, wall less the main thread's run-queue wait {(wall - queued) / n * 1e3:.1f} ms/frame "

@@ -138,16 +138,16 @@ class FrameReader:
 
     def close(self) -> None:
         """Stop the background thread (it finishes the frame it is on) and wait for it."""
-        if self._thread is None:
-            if self._gen is not None:
-                self._gen.close()
-            return
-        self._stop.set()
-        _drain(self._q)
-        self._thread.join()
-        self._thread = None
-        with contextlib.suppress(Exception):   # the decoder generator closes its container
-            self._frames.close()
+        if self._thread is not None:
+            self._stop.set()
+            _drain(self._q)
+            self._thread.join()
+            self._thread = None
+        if self._gen is not None:
+            self._gen.close()
+        close = getattr(self._frames, "close", None)   # a decoder generator closes its container
+        if close is not None:
+            close()
 
 
 class OverlayThread:

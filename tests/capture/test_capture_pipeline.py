@@ -158,3 +158,32 @@ def test_mediapipe_threaded_capture_is_the_serial_one(tmp_path):
     a = capture(video, detector="mediapipe", max_frames=40, threads=True)
     b = capture(video, detector="mediapipe", max_frames=40, threads=False)
     _same(a, b)
+
+
+@pytest.mark.parametrize("threads", [True, False])
+def test_a_cut_video_warns_once_in_the_calling_thread(tmp_path, threads):
+    import warnings
+
+    import av
+
+    from facebasis.capture.video import VideoWarning
+
+    seq = synthetic_sequence(24, size=(128, 128))
+    full = tmp_path / "full.mp4"
+    with av.open(str(full), "w", options={"movflags": "faststart"}) as c:
+        s = c.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 128, 128, "yuv420p"
+        for f in seq.frames:
+            for pk in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
+                c.mux(pk)
+        for pk in s.encode():
+            c.mux(pk)
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(full.read_bytes()[: full.stat().st_size * 2 // 3])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = capture(cut, landmarks=seq.landmarks[0], threads=threads)
+    mine = [w for w in caught if issubclass(w.category, VideoWarning)]
+    n = res.capture.n_frames
+    assert 0 < n < 24 and len(mine) == 1
+    assert f"decoded {n} frames, its container announced 24" in str(mine[0].message)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facebasis.errors import InputError
+from facebasis.errors import InputError, parameter_error
 
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
@@ -310,6 +310,8 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
     InputError
         Any bad input, before any work starts (and no output folder is left behind).
     """
+    if not isinstance(threads, (bool, np.bool_)):
+        raise parameter_error("threads", "True or False", repr(threads))
     src, lm0, det = check_capture_args(video, landmarks, detector, out, max_frames, fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
     secs = {"decode": 0.0, "landmarks": 0.0, "mesh": 0.0, "detect": 0.0, "output": 0.0}

@@ -187,3 +187,11 @@ def test_a_cut_video_warns_once_in_the_calling_thread(tmp_path, threads):
     n = res.capture.n_frames
     assert 0 < n < 24 and len(mine) == 1
     assert f"decoded {n} frames, its container announced 24" in str(mine[0].message)
+
+
+@pytest.mark.parametrize("bad", ["no", 1, None])
+def test_threads_bad_values_are_one_line(tmp_path, clip, bad):
+    path, seq = clip
+    with pytest.raises(InputError, match=r"^threads: expected True or False, found .*$"):
+        capture(path, landmarks=seq.landmarks[0], out=tmp_path / "o", threads=bad)
+    assert not (tmp_path / "o").exists()

@@ -13,7 +13,9 @@ Modules: ``video`` (frame sources), ``landmarks`` (files, iBUG-68 regions, LK wi
 (CONDENSATION), ``meshtrack`` (eq. 1-5), ``options`` (:class:`TrackerOptions`), ``tracker``
 (:class:`FaceTracker`, :func:`capture`), ``inputs`` (what :func:`capture` checks before any work,
 :class:`CaptureResult`), ``trackfile`` (output format, :func:`read_capture`),
-``overlay`` (overlay video), ``synthetic`` (generated sequences with ground truth).
+``overlay`` (overlay video), ``pipeline`` (:func:`capture`'s background threads: decoding and
+detection ahead of the tracker, the overlay behind it), ``synthetic`` (generated sequences with
+ground truth).
 """
 
 from ..geometry.laplacian import cotangent_laplacian

@@ -114,6 +114,8 @@ class DlibDetector:
     """
 
     name = "dlib"
+    #: :meth:`detect` picks the face nearest the previous landmarks: it runs after the tracker's last frame
+    needs_near = True
 
     def __init__(self, upsample: int = 1):
         try:
@@ -176,6 +178,9 @@ class MediaPipeDetector:
     """
 
     name = "mediapipe"
+    #: :meth:`detect` ignores ``near`` (MediaPipe follows the face itself), so :func:`capture` runs it
+    #: ahead of the tracker in a background thread
+    needs_near = False
 
     def __init__(self, video: bool = True):
         try:

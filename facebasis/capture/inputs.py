@@ -26,7 +26,9 @@ class CaptureResult:
     out : Path or None
         Output folder, if one was written.
     seconds : dict
-        Wall time by stage: ``decode``, ``landmarks``, ``mesh``, ``detect``, ``output``.
+        Wall time by stage: ``decode``, ``landmarks``, ``mesh``, ``detect``, ``output``, each timed in
+        the thread that runs it (with :func:`capture`'s background threads, decoding, a MediaPipe
+        detector and the overlay overlap the tracking: the sum exceeds the run's wall time).
     """
 
     capture: Capture

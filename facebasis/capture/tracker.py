@@ -9,13 +9,14 @@ the video length except for the tracked coordinates themselves), and writes the 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from facebasis.errors import InputError
+from facebasis.errors import InputError, parameter_error
 
 from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
@@ -41,7 +42,8 @@ from .meshtrack import MeshRefiner, prepare_image
 from .options import TrackerOptions
 from .particle import CondensationFilter, neighbour_weights, sample
 from .trackfile import OVERLAY_FILE, Capture, write_capture
-from .video import to_gray
+from .video import VideoWarning
+from .video import gray_pair as _grays
 
 __all__ = ["CaptureResult", "FaceTracker", "FrameResult", "TrackerOptions", "capture", "check_capture_args"]
 
@@ -50,6 +52,7 @@ __all__ = ["CaptureResult", "FaceTracker", "FrameResult", "TrackerOptions", "cap
 #: Gauss-Newton iterations per frame, damping of the affine part (measured on the ground-truth
 #: benchmark: 7 x 7 samples and 4 iterations are as precise as 11 x 11 and 8, at a third of the cost).
 DRIFT_SAMPLES, DRIFT_ITERATIONS, DRIFT_DAMPING = 7, 4, 0.05
+_NOT_RUN = object()   # no detection was run on the first frame yet
 
 
 @dataclass(frozen=True)
@@ -260,31 +263,10 @@ class FaceTracker:
         return FrameResult(lm.copy(), V.copy(), np.asarray(lost, bool).copy())
 
 
-def _u8(gray: np.ndarray) -> np.ndarray:
-    return np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
-
-
-def _grays(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The frame as grey float32 in ``[0, 1]`` (:func:`to_gray`) and as grey uint8 for LK.
-
-    A uint8 RGB frame's uint8 grey is OpenCV's conversion itself (rounding ``to_gray``'s result back
-    to 0-255 gives exactly it), so it is not recomputed from the float image."""
-    a = np.asarray(frame)
-    if a.dtype == np.uint8 and a.ndim == 3:
-        import cv2
-
-        g8 = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY)
-        return g8.astype(np.float32) / 255.0, g8
-    if a.dtype == np.uint8 and a.ndim == 2:
-        return a.astype(np.float32) / 255.0, np.ascontiguousarray(a)
-    gray = to_gray(a)
-    return gray, _u8(gray)
-
-
 def capture(video, landmarks=None, detector=None, out=None, max_frames: int | None = None,
             overlay: bool = True, fps: float | None = None, options: TrackerOptions = TrackerOptions(),
             detections_as_observations: bool = True,
-            progress: Callable[[int, int | None], None] | None = None) -> CaptureResult:
+            progress: Callable[[int, int | None], None] | None = None, threads: bool = True) -> CaptureResult:
     """Track a face through a video or an image folder.
 
     Parameters
@@ -295,8 +277,11 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
         First-frame landmarks (``.pts`` / ``.json`` file or array). Exactly one of ``landmarks``
         and ``detector``.
     detector : str or detector object, optional
-        ``"dlib"``: detect the 68 landmarks on the first frame (and, with
-        ``detections_as_observations``, on every frame as extra filter observations).
+        ``"mediapipe"`` or ``"dlib"``: detect the 68 landmarks on the first frame (and, with
+        ``detections_as_observations``, on every frame as extra filter observations). An object
+        with ``detect(frame, near=None) -> (L, 2) array or None``; unless its attribute
+        ``needs_near`` is False it is called after the previous frame is tracked, with
+        ``near`` = the previous landmarks, else ahead in the reader thread without ``near``.
     out : path-like, optional
         Output folder (written atomically): ``track.npz``, ``landmarks.csv``, ``overlay.mp4``.
     max_frames : int, optional
@@ -310,6 +295,11 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
         In detector mode, feed per-frame detections to the particle filter.
     progress : callable, optional
         Called as ``progress(frames_done, total_or_None)`` after every frame.
+    threads : bool
+        Decode (and run a detector that does not use the track, MediaPipe) ahead in a background
+        thread, and draw and encode the overlay behind in another (:mod:`facebasis.capture.pipeline`);
+        the results are bitwise those of ``threads=False``, everything in the calling thread.
+        ``seconds`` then holds each stage's wall time in its own thread (they overlap).
 
     Returns
     -------
@@ -320,10 +310,13 @@ def capture(video, landmarks=None, detector=None, out=None, max_frames: int | No
     InputError
         Any bad input, before any work starts (and no output folder is left behind).
     """
+    if not isinstance(threads, (bool, np.bool_)):
+        raise parameter_error("threads", "True or False", repr(threads))
     src, lm0, det = check_capture_args(video, landmarks, detector, out, max_frames, fps)
     total = src.n_frames if max_frames is None else (min(max_frames, src.n_frames) if src.n_frames else max_frames)
     secs = {"decode": 0.0, "landmarks": 0.0, "mesh": 0.0, "detect": 0.0, "output": 0.0}
-    run = _Run(src, lm0, det, max_frames, overlay, options, detections_as_observations, progress, total, secs)
+    run = _Run(src, lm0, det, max_frames, overlay, options, detections_as_observations, progress, total, secs,
+               bool(threads))
     if out is None:
         return CaptureResult(run(None), None, secs)
     from facebasis.atomic import atomic_directory
@@ -349,6 +342,7 @@ class _Run:
     progress: Callable | None
     total: int | None
     secs: dict
+    threads: bool = True
 
     def _timed(self, stage: str, fn, *args, **kw):
         t = time.perf_counter()
@@ -356,11 +350,12 @@ class _Run:
         self.secs[stage] += time.perf_counter() - t
         return r
 
-    def _start(self, first):
-        """First-frame landmarks (detected if not given), the tracker and the detection-noise estimate."""
+    def _start(self, first, detection):
+        """First-frame landmarks (``detection`` if the reader ran the detector, else detected now), the
+        tracker and the detection-noise estimate."""
         det = self.det
         if self.lm0 is None:
-            self.lm0 = self._timed("detect", det.detect, first)
+            self.lm0 = detection if detection is not _NOT_RUN else self._timed("detect", det.detect, first)
             if self.lm0 is None:
                 raise InputError(what=f"{{detector}} {getattr(det, 'name', det)}",
                                  expected=f"a face on the first frame of {self.src.path}", found="none",
@@ -377,44 +372,53 @@ class _Run:
         return tracker, noise
 
     def __call__(self, stage: Path | None) -> Capture:
-        src, det, secs = self.src, self.det, self.secs
-        frames = src.frames(self.max_frames)
-        first = self._timed("decode", next, frames)
-        tracker, noise = self._start(first)
-        writer = None
-        if stage is not None and self.overlay:
-            from .overlay import OverlayWriter, draw_overlay
+        from .pipeline import FrameReader, OverlayThread, thread_settings
 
-            writer = OverlayWriter(stage / OVERLAY_FILE, src.fps, src.size)
-        lms, Vs, losts = [tracker.first.landmarks], [tracker.first.vertices], [tracker.first.lost]
-        try:
-            if writer is not None:
-                self._timed("output", lambda: writer.write(
-                    draw_overlay(first, tracker.first.vertices, tracker.mesh.faces, self.lm0)))
-            if self.progress:
-                self.progress(1, self.total)
-            while True:
-                frame = self._timed("decode", next, frames, None)
-                if frame is None:
-                    break
-                dets = None
-                if det is not None and self.observe:
-                    d = self._timed("detect", det.detect, frame, near=lms[-1])
-                    dets = d if d is not None and len(d) == tracker.L else None
-                res = tracker.track(frame, dets, None if noise is None else noise.sigma)
-                if noise is not None:
-                    noise.update(dets, tracker.lk_motion, res.landmarks)
-                lms.append(res.landmarks)
-                Vs.append(res.vertices)
-                losts.append(res.lost)
-                if writer is not None:
-                    self._timed("output", lambda: writer.write(
-                        draw_overlay(frame, res.vertices, tracker.mesh.faces, res.landmarks, res.lost)))
+        src, det, secs = self.src, self.det, self.secs
+        # a detector that does not look at the track runs ahead with the decoding
+        ahead = det is not None and not getattr(det, "needs_near", True)
+        with thread_settings(self.threads):
+            reader = FrameReader(src.frames(self.max_frames, warn=False), det.detect if ahead else None, secs,
+                                 detect_first=self.lm0 is None, detect_rest=self.observe, threaded=self.threads)
+            overlay = None
+            try:
+                first, d0 = next(reader)
+                tracker, noise = self._start(first, d0 if ahead else _NOT_RUN)
+                if stage is not None and self.overlay:
+                    from .overlay import OverlayWriter
+
+                    overlay = OverlayThread(OverlayWriter(stage / OVERLAY_FILE, src.fps, src.size),
+                                            tracker.mesh.faces, secs, threaded=self.threads)
+                    overlay.put(first, tracker.first.vertices, self.lm0)
+                lms, Vs, losts = [tracker.first.landmarks], [tracker.first.vertices], [tracker.first.lost]
                 if self.progress:
-                    self.progress(len(lms), self.total)
-        finally:
-            if writer is not None:
-                writer.close()
+                    self.progress(1, self.total)
+                for frame, d in reader:
+                    dets = None
+                    if det is not None and self.observe:
+                        if not ahead:
+                            d = self._timed("detect", det.detect, frame, near=lms[-1])
+                        dets = d if d is not None and len(d) == tracker.L else None
+                    res = tracker.track(frame, dets, None if noise is None else noise.sigma)
+                    if noise is not None:
+                        noise.update(dets, tracker.lk_motion, res.landmarks)
+                    lms.append(res.landmarks)
+                    Vs.append(res.vertices)
+                    losts.append(res.lost)
+                    if overlay is not None:
+                        overlay.put(frame, res.vertices, res.landmarks, res.lost)
+                    if self.progress:
+                        self.progress(len(lms), self.total)
+                if overlay is not None:
+                    overlay, done = None, overlay
+                    done.close()
+            finally:
+                reader.close()
+                if overlay is not None:
+                    overlay.close(finish=False)
+        msg = src.shortfall()
+        if msg:
+            warnings.warn(msg, VideoWarning, stacklevel=3)
         secs["landmarks"] = tracker.timings["landmarks"]
         secs["mesh"] = tracker.timings["mesh"]
         cap = Capture(np.stack(lms), np.stack(Vs), tracker.mesh.faces.copy(), float(src.fps), src.size,

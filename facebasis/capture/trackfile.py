@@ -68,21 +68,33 @@ class Capture:
         return int(self.landmarks.shape[1])
 
 
+#: rows of ``landmarks.csv`` formatted per chunk (one format string each: much faster than
+#: ``np.savetxt``'s per-row formatting, same bytes, memory bounded on long takes)
+CSV_CHUNK = 20000
+
+
 def _csv_bytes(landmarks: np.ndarray) -> bytes:
+    """``landmarks.csv``: header ``frame,point,x,y``, then one row per frame and landmark (``%.4f``)."""
     T, L, _ = landmarks.shape
-    table = np.column_stack([np.repeat(np.arange(T), L), np.tile(np.arange(L), T), landmarks.reshape(-1, 2)])
-    buf = io.StringIO()
-    buf.write("frame,point,x,y\n")
-    np.savetxt(buf, table, fmt=["%d", "%d", "%.4f", "%.4f"], delimiter=",")
-    return buf.getvalue().encode()
+    xy = landmarks.reshape(-1, 2)
+    parts = ["frame,point,x,y\n"]
+    for a in range(0, T * L, CSV_CHUNK):
+        b = min(a + CSV_CHUNK, T * L)
+        rows = np.arange(a, b)
+        cols = (rows // L).tolist(), (rows % L).tolist(), xy[a:b, 0].tolist(), xy[a:b, 1].tolist()
+        parts.append(("%d,%d,%.4f,%.4f\n" * (b - a)) % tuple(v for row in zip(*cols) for v in row))
+    return "".join(parts).encode()
 
 
 def write_capture(folder: str | os.PathLike, cap: Capture) -> None:
-    """Write ``track.npz`` and ``landmarks.csv`` into an existing folder (each file atomically)."""
+    """Write ``track.npz`` and ``landmarks.csv`` into an existing folder (each file atomically).
+
+    ``track.npz`` is stored uncompressed: zlib takes float64 coordinates down by only about a tenth
+    (3.6 -> 3.3 MB for 1000 frames of 153 vertices) for 0.12 s of CPU per 1000 frames."""
     folder = Path(folder)
     _check_arrays(cap.landmarks, cap.vertices, cap.faces, cap.lost, f"capture for {folder}")
     buf = io.BytesIO()
-    np.savez_compressed(buf, landmarks=np.asarray(cap.landmarks, np.float64),
+    np.savez(buf, landmarks=np.asarray(cap.landmarks, np.float64),
                         vertices=np.asarray(cap.vertices, np.float64), faces=np.asarray(cap.faces, np.int64),
                         fps=np.float64(cap.fps), size=np.asarray(cap.size, np.int64),
                         lost=np.asarray(cap.lost, bool),

@@ -63,11 +63,12 @@ class FrameSource:
     files: tuple = ()
     stats: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def frames(self, max_frames: int | None = None) -> Iterator[np.ndarray]:
+    def frames(self, max_frames: int | None = None, warn: bool = True) -> Iterator[np.ndarray]:
         """Yield RGB frames, shape ``(height, width, 3)`` uint8, at most ``max_frames`` of them.
 
-        Warns (:class:`VideoWarning`) when a video ends before the frame count its container
-        announced; raises :class:`~facebasis.errors.InputError` on a frame of another size.
+        Warns (:class:`VideoWarning`, unless ``warn`` is False: a caller that iterates in another
+        thread warns itself from :meth:`shortfall`) when a video ends before the frame count its
+        container announced; raises :class:`~facebasis.errors.InputError` on a frame of another size.
         """
         self.stats.clear()
         self.stats.update(decoded=0, complete=False, error=None)
@@ -79,7 +80,7 @@ class FrameSource:
             self.stats["decoded"] = i + 1
             yield fr
         self.stats["complete"] = True
-        msg = self.shortfall()
+        msg = self.shortfall() if warn else None
         if msg:
             warnings.warn(msg, VideoWarning, stacklevel=2)
 
@@ -236,6 +237,23 @@ def to_gray(frame: np.ndarray) -> np.ndarray:
     if a.ndim == 3:
         a = a[..., :3] @ np.array([0.299, 0.587, 0.114], np.float32)
     return a
+
+
+def gray_pair(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The frame as grey float32 in ``[0, 1]`` (:func:`to_gray`) and as grey uint8 (for Lucas-Kanade).
+
+    A uint8 RGB frame's uint8 grey is OpenCV's conversion itself (rounding ``to_gray``'s result back
+    to 0-255 gives exactly it), so it is not recomputed from the float image."""
+    a = np.asarray(frame)
+    if a.dtype == np.uint8 and a.ndim == 3:
+        import cv2
+
+        g8 = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY)
+        return g8.astype(np.float32) / 255.0, g8
+    if a.dtype == np.uint8 and a.ndim == 2:
+        return a.astype(np.float32) / 255.0, np.ascontiguousarray(a)
+    gray = to_gray(a)
+    return gray, np.clip(gray * 255.0 + 0.5, 0, 255).astype(np.uint8)
 
 
 def read_frame(path: str | os.PathLike, index: int = 0) -> np.ndarray:

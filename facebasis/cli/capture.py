@@ -110,7 +110,8 @@ def cmd_capture(args) -> int:
           f"{len(cap.faces)} triangles")
     print(lost_summary(cap.lost))
     print(f"time: decode {s['decode']:.1f} s, landmarks {s['landmarks']:.1f} s, mesh {s['mesh']:.1f} s, "
-          f"detector {s['detect']:.1f} s, output {s['output']:.1f} s")
+          f"detector {s['detect']:.1f} s, output {s['output']:.1f} s (decoding, the overlay and MediaPipe's "
+          f"detections run in background threads beside the tracking)")
     print(f"wrote {res.out}")
     return 0
 

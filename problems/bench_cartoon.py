@@ -291,12 +291,12 @@ def main(argv=None):
                         parts.insert(0, cv2.resize(s, (int(s.shape[1] * h / s.shape[0]), h)))
                     strip = np.concatenate([p[:h] for p in parts], axis=1)
                     cv2.imwrite(str(out / f"cartoon_frames_{clip}_{name}_{t}.png"), strip[..., ::-1])
+    from facebasis.atomic import atomic_write_bytes
+    from facebasis.report.tables import write_dict_csv
+
     keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(out / "bench_cartoon.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, keys)
-        w.writeheader()
-        w.writerows(rows)
-    (out / "bench_cartoon.md").write_text(markdown(out / "bench_cartoon.csv"))
+    write_dict_csv(out / "bench_cartoon.csv", [{k: r.get(k, "") for k in keys} for r in rows])
+    atomic_write_bytes(out / "bench_cartoon.md", markdown(out / "bench_cartoon.csv").encode())
     print(f"wrote {out / 'bench_cartoon.csv'} and bench_cartoon.md")
 
 

@@ -83,8 +83,9 @@ def register(subparsers) -> None:
                    help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
     _head_options(p, "cartoon")
     p.add_argument("--amplitude", default="feature", metavar="feature|uniform",
-                   help="how far each feature moves (default feature: each eye, brow and the mouth in the "
-                        "cartoon's own proportions, e.g. a cartoon eye twice as tall closes by twice as much; "
+                   help="how far each feature moves (default feature: each eye and the mouth in the "
+                        "cartoon's own proportions, the brows with their eyes, e.g. a cartoon eye twice as tall "
+                        "closes by twice as much; "
                         "uniform: one scale for the whole face, the paper's eq. 12-13)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),

@@ -2,12 +2,12 @@
 
 The paper's eq. 12 scales every captured displacement by one number, the ratio of the two meshes'
 mean edge lengths (eq. 13). A target whose features have other proportions than the captured face
-(a cartoon with eyes twice as tall, a wide mouth, brows high above the eyes) then moves each
+(a cartoon with eyes twice as tall, a wide mouth) then moves each
 feature by the *face's* scale, not the feature's: an eye that closes on the capture moves the
 cartoon's lids by a fraction of the cartoon's eye height, and a detector (or a viewer) reads a
 feature that barely moves.
 
-Here each feature f (an eye, a brow, the mouth) carries the capture's displacements over by its own
+Here each feature f (an eye, the mouth; a brow with its eye) carries the capture's displacements over by its own
 2x2 map, built from the feature's own measures on the two faces. In the feature's frame (``u`` the
 unit vector between its two corner landmarks, ``n`` its normal), a displacement's component along
 ``u`` scales by the ratio ``h_f`` of the feature's widths and its component along ``n`` by the ratio
@@ -17,12 +17,12 @@ unit vector between its two corner landmarks, ``n`` its normal), a displacement'
 
 with the measures: an eye's width is the distance of its corners, its height the mean gap between
 its upper and lower lid points (an eye twice as tall on the target relative to the face closes by
-twice the pixels, the same fraction of itself); a brow's width is its eye's, its height the
-distance from the brow's centre to the eye's centre along ``n`` (a brow set high raises by more;
-the brow's motion relative to its eye's centre is what scales by it, the brow following the eye's
-centre as the eye's map moves it: scaling the brow's own displacement instead, next to lids moved
-by another ratio, made the brow's height over the eye follow the capture's at 0.72 instead of 0.997
-on cap12 with the built-in cartoon);
+twice the pixels, the same fraction of itself); a brow moves with its eye's centre (as the eye's
+map moves it) and by the face's ``s`` relative to it, so that the lids' own ratio does not carry the
+brow's height over the eye away (a brow's own ratio, its height over the eye on the two faces, was
+tried: its warped height followed the capture's at 0.78-0.95 on the photographs, 0.98-0.999 with
+``s``; scaling the brow's displacement without the anchor, next to lids moved by another ratio,
+at 0.72 on the built-in cartoon);
 the mouth scales by the ratio of its corner distances in both directions (an opening from closed
 lips has no height of its own to compare). Jaw and nose keep the paper's scalar ``s``. Every ratio
 is clamped to ``[s / bound, s bound]``: a feature that is degenerate on one face (an eye shut on the
@@ -46,16 +46,15 @@ import numpy as np
 from ..errors import InputError
 
 #: the features of the iBUG-68 set with their own map: (name, landmarks moved, the two corner landmarks
-#: giving the feature's axis, height pairs (from, to) of landmark groups whose distance along the
-#: normal is the feature's height, or None for the width ratio in both directions, the landmarks the
-#: feature's motion is measured against or None: a brow moves with its eye's centre (as the eye's
-#: map moves it) plus its own map of its motion relative to that centre, so that its height over the
-#: eye, not its height over the eye's moved lids, scales by the brow's ratio)
+#: giving the feature's axis or None (the map is ``s I``), height pairs (from, to) of landmark groups
+#: whose distance along the normal is the feature's height or None (the width ratio in both
+#: directions), the landmarks the feature's motion is measured against or None (a brow moves with
+#: its eye's centre as the eye's map moves it, plus ``s`` times its motion relative to that centre)
 FEATURES_68 = (
     ("right eye", np.r_[36:42], (36, 39), (((37,), (41,)), ((38,), (40,))), None),
     ("left eye", np.r_[42:48], (42, 45), (((43,), (47,)), ((44,), (46,))), None),
-    ("right brow", np.r_[17:22], (36, 39), ((tuple(range(17, 22)), tuple(range(36, 42))),), np.r_[36:42]),
-    ("left brow", np.r_[22:27], (42, 45), ((tuple(range(22, 27)), tuple(range(42, 48))),), np.r_[42:48]),
+    ("right brow", np.r_[17:22], None, None, np.r_[36:42]),
+    ("left brow", np.r_[22:27], None, None, np.r_[42:48]),
     ("mouth", np.r_[48:68], (48, 54), None, None),
 )
 
@@ -129,8 +128,8 @@ def feature_maps(capture_reference, target_rest, scale: float, features=FEATURES
     capture_reference : (L, 2) the capture's landmarks at rest (its first frame)
     target_rest : (L, 2) the same landmarks on the target
     scale : the eq. 13 scale ``s`` (target / capture mean edge length)
-    features : (name, moved indices, (corner, corner), height pairs or None, anchor indices or None)
-        per feature, an anchor's feature listed before
+    features : (name, moved indices, (corner, corner) or None, height pairs or None, anchor indices
+        or None) per feature, an anchor's feature listed before
     bound : every ratio is clamped to ``[s / bound, s bound]``
 
     Returns
@@ -152,10 +151,15 @@ def feature_maps(capture_reference, target_rest, scale: float, features=FEATURES
 
     names, moved, anchors, maps, ratios = [], [], [], [], []
     for name, idx, corners, pairs, anchor in features:
-        uc, nc, wc = feature_frame(P, corners)
-        ut, nt, wt = feature_frame(Q, corners)
-        h = ratio(wt, wc)
-        v = h if pairs is None else ratio(feature_height(Q, nt, pairs), feature_height(P, nc, pairs))
+        if corners is None:                  # the face's scale (a brow, relative to its eye)
+            uc = ut = np.array([1.0, 0.0])
+            nc = nt = np.array([0.0, 1.0])
+            h = v = float(scale)
+        else:
+            uc, nc, wc = feature_frame(P, corners)
+            ut, nt, wt = feature_frame(Q, corners)
+            h = ratio(wt, wc)
+            v = h if pairs is None else ratio(feature_height(Q, nt, pairs), feature_height(P, nc, pairs))
         names.append(name)
         moved.append(np.asarray(idx, np.int64))
         anchors.append(None if anchor is None else np.asarray(anchor, np.int64))
@@ -176,4 +180,5 @@ def parse_amplitude(value) -> str:
     return value.strip().lower()
 
 
-__all__ = ["FeatureMaps", "feature_maps", "feature_frame", "feature_height", "parse_amplitude", "FEATURES_68", "AMPLITUDE_MODES", "BOUND"]
+__all__ = ["FeatureMaps", "feature_maps", "feature_frame", "feature_height", "parse_amplitude", "FEATURES_68",
+           "AMPLITUDE_MODES", "BOUND"]

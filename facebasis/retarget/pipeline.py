@@ -35,8 +35,9 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     its video), ``cartoon.gif`` (the first ``gif_seconds``), ``cartoon_mesh.npz`` (vertices (T, N, 2),
     faces), ``cartoon_rest.png`` and ``summary.json``. ``head``: "still" (the cartoon shows the
     expression only) or "follow" (it also moves with the head), see :meth:`.CartoonAnimator.drive`.
-    ``amplitude``: "feature" (each eye, brow and the mouth in the cartoon's own proportions,
-    :mod:`.featurescale`) or "uniform" (the paper's one scale). No frame is written with a triangle of the warp mesh flipped against the rest cartoon.
+    ``amplitude``: "feature" (each eye and the mouth in the cartoon's own proportions,
+    :mod:`.featurescale`) or "uniform" (the paper's one scale). No frame is written with a triangle
+    of the warp mesh flipped against the rest cartoon.
     """
     from .files import read_image, read_points2d
     from .headmotion import parse_head_mode

@@ -11,7 +11,9 @@ mesh keep the source image.
 
 Beyond the paper, on real clips (:meth:`CartoonAnimator.drive`, the default of ``animate2d``): the
 head's in-plane similarity is taken out of the capture first (:mod:`.headmotion`: the cartoon keeps
-its size and place, ``head="follow"`` moves the whole image with the head instead); the mesh's
+its size and place, ``head="follow"`` moves the whole image with the head instead); each eye and
+the mouth move in the cartoon's own proportions, the brows with their eyes (:mod:`.featurescale`,
+``amplitude="feature"``: a cartoon eye twice as tall closes by twice the pixels); the mesh's
 interior points follow the landmarks by a biharmonic interpolation; lips and eyelids that meet or
 cross close instead of passing through each other (:func:`close_contacts`); and
 :mod:`.foldfree` keeps every triangle of the warp from turning over, with an exact check of every
@@ -221,8 +223,9 @@ class CartoonAnimator:
     fold_free : True (default): :mod:`.foldfree` keeps every triangle of the warp mesh from
         flipping and lip/eyelid contacts close (:func:`close_contacts`, 68 landmarks); False: the
         paper's eq. 12 target as it is (folds where the capture's points cross)
-    amplitude : "feature" (default): in :meth:`drive`, each eye, brow and the mouth move in their own
-        proportions on the target (:mod:`.featurescale`, eq. 12 per feature, 68 landmarks); "uniform":
+    amplitude : "feature" (default): in :meth:`drive`, each eye and the mouth move in their own
+        proportions on the target, the brows with their eyes (:mod:`.featurescale`, eq. 12 per
+        feature, 68 landmarks); "uniform":
         one eq. 13 scale for the whole face, as the paper
 
     Attributes
@@ -293,9 +296,10 @@ class CartoonAnimator:
 
         1. the head's similarity per frame (:func:`.headmotion.fit_head_motion`, stable landmarks
            against the first frame) is taken out of the captured vertices;
-        2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``, with ``amplitude`` "feature" each eye,
-           brow and the mouth by its own 2x2 map instead of ``s`` (:mod:`.featurescale`, fitted
-           from the capture's frame 0, the frame the correspondence is trained on, to the rest);
+        2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``, with ``amplitude`` "feature" each eye
+           and the mouth by its own 2x2 map (a brow with its eye) instead of ``s``
+           (:mod:`.featurescale`, from the capture's frame 0, the frame the correspondence is
+           trained on, to the rest);
         3. with ``fold_free``: lip and eyelid contacts close (:func:`close_contacts`), then
            :class:`.foldfree.FoldFreeMap` makes every triangle keep its orientation;
         4. with head "follow", the similarity is carried over to the cartoon (same rotation and

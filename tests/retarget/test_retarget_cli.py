@@ -190,8 +190,8 @@ def test_bad_head_values(capture, tmp_path, capsys, value):
 
 def test_amplitude_option(capture, tmp_path, capsys):
     """animate2d --amplitude feature (default) and uniform (the paper's one scale) move the eyes,
-    brows and mouth differently (the built-in cartoon's proportions are not the capture's: its
-    brows sit 1.12x as high over its eyes, its eyes are 0.9x as tall)."""
+    brows and mouth differently (the built-in cartoon's proportions are not the capture's: its eyes
+    are 0.9x as tall, relative to the face, and the brows follow the eyes' centres)."""
     folder, _ = capture
     meshes = {}
     for name, extra in (("feature", []), ("uniform", ["--amplitude", "uniform"])):

@@ -9,7 +9,10 @@ cartoon, the same cartoon stretched 1.3x wide, scikit-image's astronaut photogra
 (``cv2.stylization``) version of it, with dlib's landmarks), three ways of driving the cartoon:
 
 * ``paper``: eq. 12 as it is (the head's motion included, no fold handling), the earlier default;
-* ``still``: the new default, head similarity removed, contacts closed, fold-free warp;
+* ``uniform``: head similarity removed, contacts closed, fold-free warp, one eq. 13 scale for the
+  whole face (the default before the per-feature amplitude);
+* ``still``: the default: as ``uniform`` with each eye, brow and the mouth moved in the target's own
+  proportions (:mod:`facebasis.retarget.featurescale`);
 * ``follow``: as ``still`` with the whole image moved with the head (``--head follow``).
 
 Reported per (clip, image, mode): frames with at least one folded triangle (orientation flipped
@@ -19,7 +22,12 @@ iteration ran / where the blend fallback was needed, the cartoon's face width (d
 landmarks 0 and 16) over the clip, ms per frame (planning + warp, single thread), and the
 expression check: dlib run on the output frames and on the source frames (every ``--check-every``
 frame), the Pearson correlation over time of mouth opening, mouth width, brow height and eye
-opening (each divided by the eye-corner distance of the same detection).
+opening (each divided by the eye-corner distance of the same detection): ``r_<feature>`` (dlib on the
+output against dlib on the source: the check), beside ``r_cap_<feature>`` (the capture's own
+landmarks against dlib on the source: what any warp of this capture can reach), ``r_warp_<feature>``
+(the warped cartoon's landmarks against the capture's landmarks: does the warp carry the motion,
+before any detector) and ``r_read_<feature>`` (dlib on the output against the warped landmarks: does
+the detector read back what the warp drew), each with its median over the four measures.
 
 Frames of the real clips are written only to git-ignored files (``--png``:
 ``OUT/cartoon_frames_*.png``, source | paper | still side by side).
@@ -38,11 +46,31 @@ from facebasis.capture.trackfile import read_capture
 from facebasis.defaults.cartoon import default_cartoon
 from facebasis.retarget.warp2d import CartoonAnimator
 
-MODES = ("paper", "still", "follow")
+MODES = ("paper", "uniform", "still", "follow")
+
+
+def _painted(image):
+    """A painted version of an RGB photograph (OpenCV's edge-preserving stylisation)."""
+    import cv2
+
+    return cv2.stylization(image[..., ::-1].copy(), sigma_s=60, sigma_r=0.45)[..., ::-1].copy()
+
+
+def _cameraman():
+    """scikit-image's cameraman enlarged 1.5x (dlib finds no face at its 512 px), the 512 x 512
+    crop around the face: a grey photograph of a small face turned down, (512, 512, 3)."""
+    import cv2
+    from skimage import data
+
+    cam = np.ascontiguousarray(np.repeat(data.camera()[..., None], 3, axis=2))
+    big = cv2.resize(cam, (768, 768), interpolation=cv2.INTER_AREA)
+    return np.ascontiguousarray(big[:512, 100:612])
 
 
 def target_images(detector):
-    """[(name, image (H, W, 3) uint8 RGB, landmarks (68, 2))]: several faces, drawn and photographed."""
+    """[(name, image (H, W, 3) uint8 RGB, landmarks (68, 2))]: several faces, drawn, photographed and
+    painted: the built-in cartoon, the same stretched 1.3x wide, scikit-image's astronaut and
+    cameraman photographs and painted versions of both (dlib's landmarks on each)."""
     import cv2
 
     face = default_cartoon()
@@ -52,15 +80,17 @@ def target_images(detector):
     try:
         from skimage import data
 
-        astro = np.ascontiguousarray(data.astronaut())
+        photos = [("astronaut", np.ascontiguousarray(data.astronaut())), ("cameraman", _cameraman())]
     except ImportError:
         return out
-    lm = detector.detect(astro)
-    if lm is not None:
-        out.append(("astronaut", astro, lm))
-        painted = cv2.stylization(astro[..., ::-1].copy(), sigma_s=60, sigma_r=0.45)[..., ::-1].copy()
+    for name, photo in photos:
+        lm = detector.detect(photo)
+        if lm is None:
+            continue
+        out.append((name, photo, lm))
+        painted = _painted(photo)
         lm_p = detector.detect(painted)
-        out.append(("astronaut-painted", painted, lm if lm_p is None else lm_p))
+        out.append((f"{name}-painted", painted, lm if lm_p is None else lm_p))
     return out
 
 
@@ -80,6 +110,15 @@ def features(lm):
 FEATURES = ("mouth_open", "mouth_width", "brow_height", "eye_open")
 
 
+def correlation(a, b) -> float:
+    """Pearson correlation of two series (n,) over the entries finite in both (NaN if fewer than 4,
+    or if either is constant there)."""
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 4 or np.std(a[ok]) == 0 or np.std(b[ok]) == 0:
+        return float("nan")
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])
+
+
 def folds_per_frame(rest, meshes, faces):
     """(T,) triangles of ``faces`` whose signed area has the other sign than (or collapsed from) the rest."""
     def area(V):
@@ -94,7 +133,8 @@ def folds_per_frame(rest, meshes, faces):
 
 def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_frames, warp_every=1):
     anim = CartoonAnimator(img, lm_img, cap.landmarks[0], cap.vertices[0], cap.faces,
-                           head="follow" if mode == "follow" else "still", fold_free=mode != "paper")
+                           head="follow" if mode == "follow" else "still", fold_free=mode != "paper",
+                           amplitude="uniform" if mode in ("paper", "uniform") else "feature")
     t0 = time.perf_counter()
     if mode == "paper":
         meshes = anim.mesh(cap.vertices)
@@ -111,7 +151,7 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
     width = np.linalg.norm(meshes[:, 16] - meshes[:, 0], axis=1)
     warp, n_warp = 0.0, 0
     frames = {}
-    out_feats = []
+    out_feats, warp_feats, cap_feats = [], [], []
     for t in range(T):
         checked = detector is not None and t % check_every == 0
         if t % warp_every and t not in png_frames and not checked:
@@ -125,6 +165,8 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
         if checked:
             d = detector.detect(fr)
             out_feats.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
+            warp_feats.append(features(meshes[t, :68]))
+            cap_feats.append(features(cap.landmarks[t]))
     row = {"image": name, "mode": mode, "frames": T,
            "frames_fold_mesh": int(np.count_nonzero(folds_mesh)), "max_fold_mesh": int(folds_mesh.max()),
            "frames_fold_all": int(np.count_nonzero(folds_all)), "max_fold_all": int(folds_all.max()),
@@ -133,12 +175,14 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
            "width_min": float(width.min()), "width_max": float(width.max()),
            "ms_plan": 1e3 * plan / T, "ms_warp": 1e3 * warp / max(n_warp, 1)}
     if detector is not None and src_feats is not None:
-        of = np.array(out_feats)
+        of, wf, cf = np.array(out_feats), np.array(warp_feats), np.array(cap_feats)
         row["detected"] = int(np.count_nonzero(np.isfinite(of[:, 0])))
-        for k, fname in enumerate(FEATURES):
-            ok = np.isfinite(of[:, k]) & np.isfinite(src_feats[:, k])
-            row[f"r_{fname}"] = float(np.corrcoef(of[ok, k], src_feats[ok, k])[0, 1]) if ok.sum() > 3 else float("nan")
-        row["r_median"] = float(np.nanmedian([row[f"r_{f}"] for f in FEATURES]))
+        for prefix, (a, b) in (("r_", (of, src_feats)), ("r_cap_", (cf, src_feats)), ("r_warp_", (wf, cf)),
+                               ("r_read_", (of, wf))):
+            for k, fname in enumerate(FEATURES):
+                row[f"{prefix}{fname}"] = correlation(a[:, k], b[:, k])
+            vals = np.array([row[f"{prefix}{f}"] for f in FEATURES])
+            row[f"{prefix}median"] = float(np.median(vals[np.isfinite(vals)])) if np.isfinite(vals).any() else float("nan")
     return row, frames
 
 
@@ -156,25 +200,37 @@ def source_features(cap, detector, check_every):
 
 
 COLUMNS = ("clip", "image", "mode", "frames", "frames_fold_mesh", "max_fold_mesh", "frames_fold_all", "frames_iterated",
-           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "detected", "r_mouth_open",
-           "r_mouth_width", "r_brow_height", "r_eye_open", "r_median")
+           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "detected", "r_median")
+#: the expression table's stages, in the order of the pipeline: capture, warp, detector read-back, the check
+STAGES = (("cap", "r_cap_"), ("warp", "r_warp_"), ("read", "r_read_"), ("check", "r_"))
+
+
+def _cell(v) -> str:
+    try:
+        f = float(v)
+    except ValueError:
+        return v
+    if not np.isfinite(f):
+        return "-"
+    return f"{f:.0f}" if f == int(f) else f"{f:.3g}"
 
 
 def markdown(csv_path) -> str:
-    """The CSV written by :func:`main` as a markdown table (the columns present)."""
+    """The CSV written by :func:`main` as markdown: the folds/speed table, and (with the expression
+    check) a table of the four correlations per feature, ``cap / warp / read / check``."""
     with open(csv_path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     cols = [c for c in COLUMNS if rows and c in rows[0]]
-
-    def cell(v):
-        try:
-            f = float(v)
-        except ValueError:
-            return v
-        return f"{f:.0f}" if f == int(f) else f"{f:.3g}"
-
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(cell(r.get(c, "")) for c in cols) + " |" for r in rows]
+    lines += ["| " + " | ".join(_cell(r.get(c, "")) for c in cols) + " |" for r in rows]
+    if rows and "r_cap_median" in rows[0]:
+        names = FEATURES + ("median",)
+        head = ["clip", "image", "mode", "detected"] + [f"{n} ({' / '.join(s for s, _ in STAGES)})" for n in names]
+        lines += ["", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for r in rows:
+            cells = [r["clip"], r["image"], r["mode"], _cell(r["detected"])]
+            cells += [" / ".join(_cell(r[f"{p}{n}"]) for _, p in STAGES) for n in names]
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -235,12 +291,12 @@ def main(argv=None):
                         parts.insert(0, cv2.resize(s, (int(s.shape[1] * h / s.shape[0]), h)))
                     strip = np.concatenate([p[:h] for p in parts], axis=1)
                     cv2.imwrite(str(out / f"cartoon_frames_{clip}_{name}_{t}.png"), strip[..., ::-1])
+    from facebasis.atomic import atomic_write_bytes
+    from facebasis.report.tables import write_dict_csv
+
     keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(out / "bench_cartoon.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, keys)
-        w.writeheader()
-        w.writerows(rows)
-    (out / "bench_cartoon.md").write_text(markdown(out / "bench_cartoon.csv"))
+    write_dict_csv(out / "bench_cartoon.csv", [{k: r.get(k, "") for k in keys} for r in rows])
+    atomic_write_bytes(out / "bench_cartoon.md", markdown(out / "bench_cartoon.csv").encode())
     print(f"wrote {out / 'bench_cartoon.csv'} and bench_cartoon.md")
 
 

@@ -190,6 +190,20 @@ RECIPES: tuple[Recipe, ...] = (
                        "cp {tmp}/cartoon/bench_cartoon.csv reports/reproduction/cartoon_warp.csv",
                        "cp {tmp}/cartoon/bench_cartoon.md reports/reproduction/cartoon_warp.md"),
            data=("video", "detect"), script="problems/bench_cartoon.py"),
+    Recipe("cartoon-expression", "Expressions kept on the shared clips, per feature: capture / warp / detector "
+           "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still)",
+           ("reproduction/cartoon_expression.csv", "reproduction/cartoon_expression.md"),
+           CAPTURES + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det --modes uniform,still "
+                       "--images cartoon,astronaut,astronaut-painted,cameraman --check-every 10 --warp-every 20 "
+                       "--out {tmp}/expression",
+                       "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",
+                       "cp {tmp}/expression/bench_cartoon.md reports/reproduction/cartoon_expression.md"),
+           data=("video", "detect"), script="problems/bench_cartoon.py"),
+    Recipe("cartoon-readback", "Known expression ramps warped onto every target image and read back by dlib: "
+           "which measures a detector can see on a drawn, photographed or painted face",
+           ("reproduction/cartoon_readback.csv", "reproduction/cartoon_readback.md"),
+           (f"{PY} problems.cartoon_readback --out reports/reproduction",),
+           data=("detect",), script="problems/cartoon_readback.py"),
     Recipe("cartoon-expression-check", "dlib's reading of the animated cartoon's expression against the source",
            ("reproduction/cartoon_expression_check.csv",), (), data=("video", "detect"),
            script="problems/bench_cartoon.py",

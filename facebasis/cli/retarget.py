@@ -19,7 +19,8 @@ def _capture_video(args):
 def cmd_animate2d(args) -> int:
     from ..retarget.pipeline import run_animate2d
 
-    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=say(args.command))
+    s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=say(args.command),
+                      amplitude=args.amplitude)
     beside = f", beside {s['video_beside']}" if s["video_beside"] else ""
     print(f"animated {s['frames']} frames ({s['warp_ms_per_frame']:.1f} ms per frame warp{beside}) -> {args.out}")
     return 0
@@ -81,6 +82,11 @@ def register(subparsers) -> None:
     p.add_argument("--landmarks", default=None, metavar="CARTOON.pts",
                    help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
     _head_options(p, "cartoon")
+    p.add_argument("--amplitude", default="feature", metavar="feature|uniform",
+                   help="how far each feature moves (default feature: each eye and the mouth in the "
+                        "cartoon's own proportions, the brows with their eyes, e.g. a cartoon eye twice as tall "
+                        "closes by twice as much; "
+                        "uniform: one scale for the whole face, the paper's eq. 12-13)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),
                                                       derived=_capture_video))

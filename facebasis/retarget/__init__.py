@@ -17,6 +17,7 @@ warp2d     a cartoon image animated by the capture (:class:`CartoonAnimator`)
 raster2d   the vectorised piecewise-affine image warp (scanline rasteriser, ``cv2.remap``)
 foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
+featurescale eq. 12 per feature: each eye and the mouth moved in the target's own proportions
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
 framefit   one frame's pose/weight fit with frozen settings (:class:`FrameSolver`, :class:`FrameFit`)

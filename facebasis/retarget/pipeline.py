@@ -28,21 +28,26 @@ def _log(log, text):
 # 2D
 
 def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds: float = 4.0, head: str = "still",
-                  log=None) -> dict:
+                  log=None, amplitude: str = "feature") -> dict:
     """Animate a cartoon image (default: the built-in cartoon) by a capture folder.
 
     Writes ``cartoon.mp4`` (the source video's frames beside the cartoon when the capture records
     its video), ``cartoon.gif`` (the first ``gif_seconds``), ``cartoon_mesh.npz`` (vertices (T, N, 2),
     faces), ``cartoon_rest.png`` and ``summary.json``. ``head``: "still" (the cartoon shows the
     expression only) or "follow" (it also moves with the head), see :meth:`.CartoonAnimator.drive`.
-    No frame is written with a triangle of the warp mesh flipped against the rest cartoon.
+    ``amplitude``: "feature" (each eye and the mouth in the cartoon's own proportions,
+    :mod:`.featurescale`) or "uniform" (the paper's one scale). No frame is written with a triangle
+    of the warp mesh flipped against the rest cartoon.
     """
     from .files import read_image, read_points2d
     from .headmotion import parse_head_mode
     from .media import check_video, read_video_frames, side_by_side, write_gif, write_mp4
     from .warp2d import CartoonAnimator
 
+    from .featurescale import parse_amplitude
+
     head = parse_head_mode(head)
+    amplitude = parse_amplitude(amplitude)
     cap = read_capture(capture_dir)
     if (image is None) != (landmarks is None):
         raise InputError(what="{image} and {landmarks}", expected="both (a cartoon and its landmarks) or neither "
@@ -64,13 +69,13 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
                              f"count), found {len(pts)}")
         img, what = read_image(image), str(image)
     t0 = time.perf_counter()
-    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head)
+    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head, amplitude=amplitude)
     drive = anim.drive(cap.vertices, cap.landmarks)
     meshes = drive.meshes
     n_fold = int(np.count_nonzero(drive.folded_target))
     n_fallback = int(np.count_nonzero(drive.alpha < 1))
     _log(log, f"cartoon: {what}, {img.shape[1]}x{img.shape[0]}; capture {cap.n_frames} frames, "
-              f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}; head {head}; "
+              f"{cap.vertices.shape[1]} vertices; eq. 13 scale {anim.scale:.4f}; head {head}; amplitude {amplitude}; "
               f"{n_fold} frames would fold, the warp gave way in {int(np.count_nonzero(drive.iterations))} "
               f"(blended towards the rest in {n_fallback})")
     overlay = Path(capture_dir) / OVERLAY_FILE  # the source video, or else the capture's overlay of it
@@ -106,6 +111,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
             raise InputError(f"cartoon image: OpenCV could not encode it as PNG ({img.shape}, {img.dtype})")
         atomic_write_bytes(stage / "cartoon_rest.png", png.tobytes())
         summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c, "head": head,
+                   "amplitude": amplitude,
                    "frames_target_folded": n_fold, "frames_gave_way": int(np.count_nonzero(drive.iterations)),
                    "frames_blended_to_rest": n_fallback, "plan_ms_per_frame": 1e3 * drive.seconds / max(n, 1),
                    "video_beside": str(video) if video is not None else None,

@@ -11,7 +11,9 @@ mesh keep the source image.
 
 Beyond the paper, on real clips (:meth:`CartoonAnimator.drive`, the default of ``animate2d``): the
 head's in-plane similarity is taken out of the capture first (:mod:`.headmotion`: the cartoon keeps
-its size and place, ``head="follow"`` moves the whole image with the head instead); the mesh's
+its size and place, ``head="follow"`` moves the whole image with the head instead); each eye and
+the mouth move in the cartoon's own proportions, the brows with their eyes (:mod:`.featurescale`,
+``amplitude="feature"``: a cartoon eye twice as tall closes by twice the pixels); the mesh's
 interior points follow the landmarks by a biharmonic interpolation; lips and eyelids that meet or
 cross close instead of passing through each other (:func:`close_contacts`); and
 :mod:`.foldfree` keeps every triangle of the warp from turning over, with an exact check of every
@@ -221,6 +223,10 @@ class CartoonAnimator:
     fold_free : True (default): :mod:`.foldfree` keeps every triangle of the warp mesh from
         flipping and lip/eyelid contacts close (:func:`close_contacts`, 68 landmarks); False: the
         paper's eq. 12 target as it is (folds where the capture's points cross)
+    amplitude : "feature" (default): in :meth:`drive`, each eye and the mouth move in their own
+        proportions on the target, the brows with their eyes (:mod:`.featurescale`, eq. 12 per
+        feature, 68 landmarks); "uniform":
+        one eq. 13 scale for the whole face, as the paper
 
     Attributes
     ----------
@@ -229,11 +235,14 @@ class CartoonAnimator:
     """
 
     def __init__(self, image, image_landmarks, capture_landmarks, capture_vertices, faces, c: float | None = None,
-                 border: float = 0.4, head: str = "still", fold_free: bool = True, interior: str = "smooth"):
+                 border: float = 0.4, head: str = "still", fold_free: bool = True, interior: str = "smooth",
+                 amplitude: str = "feature"):
+        from .featurescale import parse_amplitude
         from .headmotion import parse_head_mode
 
         self.image = _check_image(image)
         self.head_mode = parse_head_mode(head)
+        self.amplitude = parse_amplitude(amplitude)
         lm_img = np.asarray(image_landmarks, np.float64)
         lm_cap = np.asarray(capture_landmarks, np.float64)
         if lm_img.shape != lm_cap.shape:
@@ -287,7 +296,10 @@ class CartoonAnimator:
 
         1. the head's similarity per frame (:func:`.headmotion.fit_head_motion`, stable landmarks
            against the first frame) is taken out of the captured vertices;
-        2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``;
+        2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``, with ``amplitude`` "feature" each eye
+           and the mouth by its own 2x2 map (a brow with its eye) instead of ``s``
+           (:mod:`.featurescale`, from the capture's frame 0, the frame the correspondence is
+           trained on, to the rest);
         3. with ``fold_free``: lip and eyelid contacts close (:func:`close_contacts`), then
            :class:`.foldfree.FoldFreeMap` makes every triangle keep its orientation;
         4. with head "follow", the similarity is carried over to the cartoon (same rotation and
@@ -311,7 +323,14 @@ class CartoonAnimator:
             raise InputError(f"capture landmarks: expected shape ({len(V)}, {len(self.capture_landmarks)}, 2), "
                              f"found {lm.shape}")
         motion = fit_head_motion(lm, self.capture_landmarks)
-        target = self.mesh(motion.remove(V))
+        V = motion.remove(V)
+        if self.amplitude == "feature" and len(self.capture_landmarks) == 68:   # eq. 12 per feature
+            from .featurescale import feature_maps
+
+            maps = feature_maps(self.capture_landmarks, self.rest[:68], self.scale)
+            target = self.rest + maps.apply(V - self.capture_rest)
+        else:
+            target = self.mesh(V)
         if self._smooth is not None:                 # the interior follows the landmarks smoothly
             L = len(self.capture_landmarks)
             target[:, L:] = self.rest[L:] + np.einsum("vl,tlc->tvc", self._smooth, target[:, :L] - self.rest[:L])
@@ -382,7 +401,7 @@ class CartoonAnimation:
 
 def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices, faces, c=None,
                     border: float = 0.4, head: str = "still", fold_free: bool = True,
-                    interior: str = "smooth") -> CartoonAnimation:
+                    interior: str = "smooth", amplitude: str = "feature") -> CartoonAnimation:
     """One-off: animate ``image`` by captured vertices (T, N, 2) (:meth:`CartoonAnimator.drive`).
 
     ``capture_landmarks`` is (T, L, 2) (frame 0 trains the RBF, all frames give the head's
@@ -392,7 +411,8 @@ def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices,
     V = np.asarray(capture_vertices, np.float64)
     lm = np.asarray(capture_landmarks, np.float64)
     lm_all = lm if lm.ndim == 3 else V[:, :len(lm)]
-    anim = CartoonAnimator(image, image_landmarks, lm_all[0], V[0], faces, c, border, head, fold_free, interior)
+    anim = CartoonAnimator(image, image_landmarks, lm_all[0], V[0], faces, c, border, head, fold_free, interior,
+                           amplitude)
     drive = anim.drive(V, lm_all)
     frames = np.stack([anim.frame_at(drive, t) for t in range(len(V))])
     return CartoonAnimation(frames, drive.meshes, anim.faces, anim.scale, anim.rest)

@@ -188,6 +188,31 @@ def test_bad_head_values(capture, tmp_path, capsys, value):
                f"--head: expected one of still, follow, found {value!r}", capsys, out)
 
 
+def test_amplitude_option(capture, tmp_path, capsys):
+    """animate2d --amplitude feature (default) and uniform (the paper's one scale) move the eyes,
+    brows and mouth differently (the built-in cartoon's proportions are not the capture's: its eyes
+    are 0.9x as tall, relative to the face, and the brows follow the eyes' centres)."""
+    folder, _ = capture
+    meshes = {}
+    for name, extra in (("feature", []), ("uniform", ["--amplitude", "uniform"])):
+        out = tmp_path / f"amp_{name}"
+        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        assert json.loads((out / "summary.json").read_text())["amplitude"] == name
+        with np.load(out / "cartoon_mesh.npz") as d:
+            meshes[name] = d["vertices"].astype(np.float64)
+    diff = np.abs(meshes["feature"] - meshes["uniform"]).max(axis=(0, 2))
+    assert diff[17:27].max() > 1.0 and diff[36:48].max() > 1.0 and diff[48:68].max() > 1.0
+
+
+@pytest.mark.parametrize("value", ["loud", "Feature!", ""])
+def test_bad_amplitude_values(capture, tmp_path, capsys, value):
+    folder, _ = capture
+    out = tmp_path / "out"
+    _fails(["animate2d", str(folder), "--amplitude", value, "--out", str(out)],
+           f"--amplitude: expected one of feature, uniform, found {value!r}", capsys, out)
+
+
 # ---------------------------------------------------------------------------------------------
 # every error: one line, before any work, no output folder
 

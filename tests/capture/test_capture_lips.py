@@ -51,14 +51,14 @@ def test_lip_partners_only_for_68_points():
 
 
 def test_bad_inner_lips_value_is_rejected(seq):
-    with pytest.raises(InputError, match="inner_lips: expected one of follow, track, found 'open'"):
+    with pytest.raises(InputError, match="inner_lips: expected one of follow, track, auto, found 'open'"):
         FaceTracker(seq.frames[0], seq.landmarks[0], TrackerOptions(inner_lips="open"))
 
 
 def test_follow_places_inner_points_on_their_partners(seq):
     """Without detections the inner points are their outer partners plus frame 0's offset, turned
     and scaled with the outer lip; the default ("follow") keeps the tracking error bounds."""
-    L = _run(seq, TrackerOptions(refine_mesh=False))
+    L = _run(seq, TrackerOptions(refine_mesh=False, inner_lips="follow"))
     inner, partner = lip_partners(68)
     off0 = seq.landmarks[0, inner] - seq.landmarks[0, partner]
     for t in (5, 17, 29):
@@ -82,7 +82,7 @@ def test_detections_renew_the_lip_thickness(seq):
         return np.linalg.norm(d, axis=-1)[10:].mean()
 
     truth = _gap(seq.landmarks)
-    opt = TrackerOptions(refine_mesh=False)
+    opt = TrackerOptions(refine_mesh=False, inner_lips="follow")
     L_det, L_follow = _run(seq, opt, seq.landmarks), _run(seq, opt)
     L_track = _run(seq, TrackerOptions(refine_mesh=False, inner_lips="track"))
     err_det, err_follow, err_track = (thickness_error(L) for L in (L_det, L_follow, L_track))
@@ -109,7 +109,7 @@ def test_cli_inner_lips_option(tmp_path, seq):
     register(parser.add_subparsers(dest="command"))
     base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
     args = parser.parse_args([*base, "--out", str(tmp_path / "bad"), "--inner-lips", "open"])
-    with pytest.raises(InputError, match="--inner-lips: expected one of follow, track, found 'open'"):
+    with pytest.raises(InputError, match="--inner-lips: expected one of follow, track, auto, found 'open'"):
         args.func(args)
     assert not (tmp_path / "bad").exists()
     got = {}

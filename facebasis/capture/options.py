@@ -28,7 +28,13 @@ class TrackerOptions:
         Per-region LK windows ``{region: (width, height)}`` overriding
         :data:`facebasis.capture.landmarks.DEFAULT_WINDOWS`.
     inner_lips : str
-        ``"follow"`` (default): the inner-lip points of a 68-point iBUG set (61-63, 65-67) follow
+        ``"auto"`` (default): as ``"follow"``, except that an inner-lip point whose first-frame
+        appearance the drift correction finds again this frame (accepted by ``drift_max_shift`` and
+        ``drift_zncc``) keeps its tracked position and renews the lip-thickness offset ``o`` it is
+        followed with once it is no longer found (a mouth that opens changes the patch). On warped
+        faces, where a closed mouth is stretched but stays closed, following the outer lip put the
+        inner lips 1.5-2 px off on a 205 px face (mean; 4 px worst), tracking them 0.2-0.5 px
+        (reports/capture/gt_benchmark.md). ``"follow"``: the inner-lip points of a 68-point iBUG set (61-63, 65-67) follow
         their outer-lip partner across the same lip (50-52, 56-58),
         ``p_inner = p_outer + a o``, with ``o`` the lip-thickness offset of the first frame and
         ``a`` the complex factor (rotation and scale) of the least-squares similarity of the outer
@@ -71,7 +77,7 @@ class TrackerOptions:
     lk_levels: int = 3
     fb_threshold: float = 1.0
     windows: dict | None = None
-    inner_lips: str = "follow"
+    inner_lips: str = "auto"
     drift_correction: bool = True
     drift_affine: bool = True
     drift_max_shift: float = 1.0

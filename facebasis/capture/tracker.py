@@ -22,6 +22,7 @@ from .facemesh import FaceMesh, build_face_mesh
 from .harmonic import HarmonicDeformer
 from .inputs import CaptureResult, check_capture_args
 from .landmarks import (
+    REFERENCE_FACE_WIDTH,
     face_scale,
     face_width,
     lip_partners,
@@ -111,8 +112,9 @@ class FaceTracker:
         self.harmonic = HarmonicDeformer(self.mesh.vertices, self.mesh.faces, np.arange(L))  # eq. 9, factored once
         held = np.zeros(len(self.mesh.vertices), bool)
         held[:L] = True
-        self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh)
-        self._inner, self._partner = lip_partners(L) if options.inner_lips == "follow" else (np.zeros(0, np.int64),) * 2
+        self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh,
+                                   size=face_width(lm) / REFERENCE_FACE_WIDTH)
+        self._inner, self._partner = lip_partners(L) if options.inner_lips != "track" else (np.zeros(0, np.int64),) * 2
         self._outer0 = lm[48:60].copy() if len(self._inner) else None    # outer lip of frame 0
         self._offset = lm[self._inner] - lm[self._partner]              # lip thickness, frame 0's axes
         self.filter = CondensationFilter(gray, lm, self.scale, options.filter) if options.use_filter else None
@@ -130,8 +132,10 @@ class FaceTracker:
         self.timings = {"landmarks": 0.0, "mesh": 0.0}
         self.lk_motion = np.zeros_like(lm)   # LK's motion of the landmarks in the last frame
 
-    def _follow_lips(self, lm: np.ndarray, detections: np.ndarray | None) -> np.ndarray:
-        """Place the inner-lip points on their outer-lip partners (``inner_lips="follow"``)."""
+    def _follow_lips(self, lm: np.ndarray, detections: np.ndarray | None, seen: np.ndarray | None = None) -> np.ndarray:
+        """Place the inner-lip points on their outer-lip partners (``inner_lips="follow"``); with
+        ``inner_lips="auto"`` the points in ``seen`` (P,) bool (their first-frame appearance found again
+        by the drift correction) keep their tracked position and renew the lip-thickness offset."""
         if not len(self._inner):
             return lm
         a = similarity_factor(self._outer0, lm[48:60])
@@ -141,13 +145,25 @@ class FaceTracker:
             det = np.asarray(detections, float)
             d = det[self._inner] - det[self._partner]
             ok = np.all(np.isfinite(d), axis=1)
-            seen = _from_complex(_to_complex(d) / a)                     # back in frame 0's axes
-            self._offset[ok] = (1.0 - LIP_RENEW) * self._offset[ok] + LIP_RENEW * seen[ok]
+            d0 = _from_complex(_to_complex(d) / a)                       # back in frame 0's axes
+            self._offset[ok] = (1.0 - LIP_RENEW) * self._offset[ok] + LIP_RENEW * d0[ok]
         out = lm.copy()
         out[self._inner] = follow_outer_lip(lm[self._partner], self._offset, a)
+        if seen is not None and seen.any():
+            # a point seen again keeps its tracked position and renews the lip thickness it is
+            # followed with once it is no longer seen (the mouth opened)
+            out[self._inner] = np.where(seen[:, None], lm[self._inner], out[self._inner])
+            self._offset[seen] = _from_complex(_to_complex(out[self._inner] - lm[self._partner]) / a)[seen]
         if self.filter is not None:
             self.filter.place(self._inner, out[self._inner])
         return out
+
+    def _lip_seen(self) -> np.ndarray:
+        """Inner-lip points (P,) bool that keep their tracked position: with ``inner_lips="auto"`` those
+        whose first-frame appearance the drift correction found again this frame, else none."""
+        if self.opt.inner_lips != "auto":
+            return np.zeros(len(self._inner), bool)
+        return self._drift_ok[self._inner].copy()
 
     def _predict_failed(self, lk):
         """Where LK failed (status, forward-backward check, or a point off the frame), put the point at
@@ -239,15 +255,16 @@ class FaceTracker:
             lk = self._correct_drift(lk, prep)
         if self.filter is not None:
             ok = lk.ok | self._drift_ok
-            ok[self._inner] = False          # placed by the lip model: no LK evidence for their neighbours
+            ok[self._inner] = self._lip_seen()   # placed by the lip model: no LK evidence for their neighbours
             lm, lost = self.filter.step(gray, lk.points, ok, detections, detection_sigma,
                                         trusted=self._drift_ok & ok)
         else:
             lm, lost = lk.points, ~(lk.ok | self._drift_ok)
         self.lk_motion = lk.points - self._lm   # the tracked (drift-corrected) motion: detection noise estimate
         lost = np.asarray(lost, bool).copy()
-        lost[self._inner] = lost[self._partner]
-        lm = self._follow_lips(lm, detections)
+        seen = self._lip_seen() if self.opt.inner_lips == "auto" else None
+        lost[self._inner] = lost[self._partner] if seen is None else np.where(seen, lost[self._inner], lost[self._partner])
+        lm = self._follow_lips(lm, detections, seen)
         lm, lost = self._repair_outliers(lm, lost)
         self._lost_prev = lost.copy()
         lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])

@@ -101,6 +101,13 @@ def test_nearly_closed_mouth_and_duplicate_points():
 
 
 def test_capture_starts_on_a_closed_mouth_and_opens_it(tmp_path):
+    """A closed first frame starts. "follow": the inner lips move with the outer lips, so the mouth
+    opens with the face. "auto" (default): the warp only stretches this closed mouth (its inner-lip
+    line stays one line) and the inner points, whose first-frame appearance is found again, are
+    tracked on it. On this drawn mouth (a plain dark line: nothing pins a point along it) that is
+    not better than following: inner-lip error 0.66 px against 0.52 (measured)."""
+    from facebasis.capture.tracker import TrackerOptions
+
     img, lm = closed_mouth_face()
     anim = WarpAnimation(img, lm, Motion())
     d = tmp_path / "frames"
@@ -108,13 +115,18 @@ def test_capture_starts_on_a_closed_mouth_and_opens_it(tmp_path):
     for t in range(12):
         cv2.imwrite(str(d / f"f{t:03d}.png"), anim.frame(t)[..., ::-1])
     (tmp_path / "first.pts").write_text(format_pts(lm))
-    res = capture(d, landmarks=tmp_path / "first.pts", out=tmp_path / "out")
     truth = np.stack([anim.points(t, lm) for t in range(12)])
-    assert res.landmarks.shape == (12, 68, 2)
-    assert np.abs(res.landmarks - truth).mean() < 1.0
-    gap = np.linalg.norm(res.landmarks[:, 62] - res.landmarks[:, 66], axis=1)
-    true_gap = np.linalg.norm(truth[:, 57] - truth[:, 51], axis=1) - np.linalg.norm(truth[0, 57] - truth[0, 51])
-    assert gap[0] == 0 and gap[-1] > 0.5 * true_gap[-1] > 0.5   # the mouth opens with the face
+    inner, err = [61, 62, 63, 65, 66, 67], {}
+    for mode in ("follow", "auto"):
+        res = capture(d, landmarks=tmp_path / "first.pts", out=tmp_path / mode, options=TrackerOptions(inner_lips=mode))
+        assert res.landmarks.shape == (12, 68, 2)
+        assert np.abs(res.landmarks - truth).mean() < 1.0
+        err[mode] = np.linalg.norm(res.landmarks[:, inner] - truth[:, inner], axis=-1).mean()
+        if mode == "follow":
+            gap = np.linalg.norm(res.landmarks[:, 62] - res.landmarks[:, 66], axis=1)
+            true_gap = np.linalg.norm(truth[:, 57] - truth[:, 51], axis=1) - np.linalg.norm(truth[0, 57] - truth[0, 51])
+            assert gap[0] == 0 and gap[-1] > 0.5 * true_gap[-1] > 0.5   # the mouth opens with the face
+    assert err["auto"] < 1.0 and err["follow"] < 1.0
 
 
 @pytest.mark.skipif(not REAL_CLIP.exists(), reason="real clips not found at ../shared/data/video")

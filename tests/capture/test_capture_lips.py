@@ -51,14 +51,14 @@ def test_lip_partners_only_for_68_points():
 
 
 def test_bad_inner_lips_value_is_rejected(seq):
-    with pytest.raises(InputError, match="inner_lips: expected one of follow, track, found 'open'"):
+    with pytest.raises(InputError, match="inner_lips: expected one of follow, track, auto, found 'open'"):
         FaceTracker(seq.frames[0], seq.landmarks[0], TrackerOptions(inner_lips="open"))
 
 
 def test_follow_places_inner_points_on_their_partners(seq):
     """Without detections the inner points are their outer partners plus frame 0's offset, turned
     and scaled with the outer lip; the default ("follow") keeps the tracking error bounds."""
-    L = _run(seq, TrackerOptions(refine_mesh=False))
+    L = _run(seq, TrackerOptions(refine_mesh=False, inner_lips="follow"))
     inner, partner = lip_partners(68)
     off0 = seq.landmarks[0, inner] - seq.landmarks[0, partner]
     for t in (5, 17, 29):
@@ -82,7 +82,7 @@ def test_detections_renew_the_lip_thickness(seq):
         return np.linalg.norm(d, axis=-1)[10:].mean()
 
     truth = _gap(seq.landmarks)
-    opt = TrackerOptions(refine_mesh=False)
+    opt = TrackerOptions(refine_mesh=False, inner_lips="follow")
     L_det, L_follow = _run(seq, opt, seq.landmarks), _run(seq, opt)
     L_track = _run(seq, TrackerOptions(refine_mesh=False, inner_lips="track"))
     err_det, err_follow, err_track = (thickness_error(L) for L in (L_det, L_follow, L_track))
@@ -109,7 +109,7 @@ def test_cli_inner_lips_option(tmp_path, seq):
     register(parser.add_subparsers(dest="command"))
     base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
     args = parser.parse_args([*base, "--out", str(tmp_path / "bad"), "--inner-lips", "open"])
-    with pytest.raises(InputError, match="--inner-lips: expected one of follow, track, found 'open'"):
+    with pytest.raises(InputError, match="--inner-lips: expected one of follow, track, auto, found 'open'"):
         args.func(args)
     assert not (tmp_path / "bad").exists()
     got = {}
@@ -118,3 +118,19 @@ def test_cli_inner_lips_option(tmp_path, seq):
         assert args.func(args) == 0
         got[mode] = read_capture(tmp_path / mode).landmarks
     assert not np.allclose(got["follow"][1:, 60:], got["track"][1:, 60:])
+
+
+def test_auto_tracks_inner_lips_seen_again_on_a_photograph():
+    """inner_lips="auto" (default): on a warped photograph (the astronaut; the warp stretches the
+    closed mouth, it does not open it) the inner-lip points keep their tracked positions where the
+    drift correction finds their first-frame appearance again, closer to the truth than following
+    the outer lip (measured over 40 frames: 0.377 px against 0.426). (On the drawn cartoon, whose
+    lip lines are plain dark strokes that do not pin a point along them, following is better:
+    0.81 px against 0.96 for auto and for "track".)"""
+    astro = synthetic_sequence(40, face="astronaut")
+    inner = [61, 62, 63, 65, 66, 67]
+    err = {}
+    for mode in ("follow", "auto"):
+        L = _run(astro, TrackerOptions(refine_mesh=False, inner_lips=mode))
+        err[mode] = np.linalg.norm(L[:, inner] - astro.landmarks[:, inner], axis=-1).mean()
+    assert err["auto"] < 0.95 * err["follow"]

@@ -52,11 +52,13 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-overlay", action="store_true", help="do not write overlay.mp4")
     p.add_argument("--fps", type=float, default=None, metavar="F",
                    help="frame rate of an image folder (default 25)")
-    p.add_argument("--inner-lips", default="follow", metavar="follow|track",
-                   help="inner-lip points of a 68-point iBUG set: 'follow' (default) moves them with the outer "
-                        "lip across the same lip, keeping the first frame's lip thickness (renewed from the "
-                        "detections with --detector), since closed lips put an upper and a lower point on one "
-                        "patch that LK cannot split; 'track' tracks the lip line itself (the mouth may not open)")
+    p.add_argument("--inner-lips", default="auto", metavar="auto|follow|track",
+                   help="inner-lip points of a 68-point iBUG set: 'auto' (default) tracks a point while its "
+                        "first-frame appearance is found again and otherwise moves it with the outer lip; "
+                        "'follow' always moves them with the outer lip across the same lip, keeping the first "
+                        "frame's lip thickness (renewed from the detections with --detector), since closed lips "
+                        "put an upper and a lower point on one patch that LK cannot split; 'track' tracks the "
+                        "lip line itself (the mouth may not open)")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     p.set_defaults(func=cmd_capture, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("input", "landmarks")))
     register_landmarks(subparsers)

@@ -118,6 +118,8 @@ def test_cli_inner_lips_option(tmp_path, seq):
         assert args.func(args) == 0
         got[mode] = read_capture(tmp_path / mode).landmarks
     assert not np.allclose(got["follow"][1:, 60:], got["track"][1:, 60:])
+    # the command line's default is the library's
+    assert parser.parse_args([*base, "--out", str(tmp_path / "d")]).inner_lips == TrackerOptions().inner_lips == "auto"
 
 
 def test_auto_tracks_inner_lips_seen_again_on_a_photograph():

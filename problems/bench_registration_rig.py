@@ -134,7 +134,9 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
         med, p95, mx = _stats(e)
         rows.append({"seed": seed, "person": kind, "method": method, "scan": nm, "err_median": med, "err_p95": p95,
                      "err_max": mx, "seconds": sec, "cpu_seconds": cpu, "load": os.getloadavg()[0]})
-        out.append(res.vertices if nm == "neutral" else res.similarity.inverse().apply(res.vertices))
+        # into the neutral's frame by the head's pose: the rigid stage's, refined by the model fit's
+        pose = res.similarity if res.model is None else res.model.pose.then(res.similarity)
+        out.append(res.vertices if nm == "neutral" else pose.inverse().apply(res.vertices))
         log(f"seed {seed} {kind:8s} {method:9s} {nm:13s} err median {med:.4f} p95 {p95:.4f} max {mx:.3f} | "
             f"{sec:.1f} s wall {cpu:.1f} s CPU load {rows[-1]['load']:.1f}")
     n_ex = len(p.examples)
@@ -203,7 +205,8 @@ def write_markdown(out: Path, argv=None) -> None:
                      f"{f(r['jawOpen_median'])} / {f(r['jawOpen_p95'])} | {f(r['mouthSmile_L_median'])} / "
                      f"{f(r['mouthSmile_L_p95'])} | {f(r['mouthPucker_median'])} / {f(r['mouthPucker_p95'])} | "
                      f"{r['worst_p95_scan']} | {float(r['seconds_median']):.1f} ({float(r['seconds_max']):.1f}) | "
-                     f"{float(r['load']):.1f} | {f(r['examples_rig_frame_mean']) if r.get('examples_rig_frame_mean') else ''} |")
+                     f"{float(r['load']):.1f} | {f(r['examples_rig_frame_mean']) if r.get('examples_rig_frame_mean') else ''}"
+                     " |")
     scans = rows("rig_scans.csv")
     cpu = np.array([float(r["cpu_seconds"]) for r in scans])
     lines += ["", f"Per scan ({len(scans)} scans, `rig_scans.csv`): CPU seconds median {np.median(cpu):.1f}, max "

@@ -161,6 +161,18 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 "
             "--after-model nricp normal --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
+           "in-space person, seed 0; per-part errors in the rig's frame",
+           ("registration/regions/rig.csv", "registration/regions/rig.md", "registration/regions/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons in-space --fit-modes 100 "
+            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions",), data=("ict",),
+           script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions-seed1", "The same on a second person (seed 1)",
+           ("registration/regions_seed1/rig.csv", "registration/regions_seed1/rig.md",
+            "registration/regions_seed1/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
+            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_seed1",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",
            ("retarget/retarget_table.csv", "retarget/retarget_table.md", "retarget/identity_table.csv",

@@ -103,7 +103,7 @@ class RegistrationResult:
     Attributes
     ----------
     vertices : (n, 3) the template's topology laid on the scan, in the scan's frame and units
-    similarity : start (template) -> scan: the rigid stage's similarity, after a model fit with the fit's pose
+    similarity : template -> scan similarity of the rigid stage (after a model fit: ``model.pose.then(similarity)``)
     distance : (n,) distance of each vertex to the scan surface (scan units)
     no_surface : (n,) bool, vertices that found no usable scan surface (followed the stiffness term)
     iterations : non-rigid ICP iterations over all stiffness levels
@@ -381,8 +381,7 @@ class Registration:
             Xt[self.skin] = res.vertices[self.skin]
         X = sim.apply(Xt)
         lm_err = np.linalg.norm(X[lm_idx] - lm_pts, axis=1) if lm_pts is not None else None
-        pose = sim if model is None else model.pose.then(sim)  # the fit refines the head's pose: part of it
-        return RegistrationResult(X, pose, res.distance * sim.scale, res.no_surface, res.iterations, score,
+        return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
                                   lm_err, time.perf_counter() - t0, model, kind, names,
                                   (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
 

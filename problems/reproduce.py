@@ -173,6 +173,13 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
             "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-attribution-seed1", "Where the registered rig's held-out excess comes from (seed 1): "
+           "the ratio with the neutral, the motion or one of ICT's vertex ranges made exact",
+           ("registration/attribution_seed1/rig.csv", "registration/attribution_seed1/rig.md",
+            "registration/attribution_seed1/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
+            "--after-model normal --no-baseline --attribution --out reports/registration/attribution_seed1",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",
            ("retarget/retarget_table.csv", "retarget/retarget_table.md", "retarget/identity_table.csv",

@@ -109,3 +109,28 @@ def test_cli_expression_regions_bad_value_and_repeat(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(base + ["--expression-regions", "many"])
     assert e.value.code == 2 and "--expression-regions" in capsys.readouterr().err
+
+
+def test_cli_expression_regions_registers_a_folder(tmp_path, capsys):
+    import json
+
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    ict = tmp_path / "facex"
+    ict.mkdir()
+    write_mesh(ict / "neutral.obj", T, F)
+    write_mesh(ict / "identity000.obj", T + 0.0, F)
+    for nm in ("jawOpen", "mouthSmile_L"):
+        write_mesh(ict / f"{nm}.obj", T + rig.deltas[rig.names.index(nm)], F)
+    w = np.zeros(len(rig.names))
+    w[rig.names.index("jawOpen")] = 0.8
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for nm, V, seed in (("neutral", T, 2), ("jaw", _varying(rig, w), 3)):
+        S, G, _, _ = as_scan(V, F, seed=seed)
+        write_mesh(scans / f"{nm}.obj", S, G)
+    rc = main(["register", str(scans), "--template", str(ict / "neutral.obj"), "--out", str(tmp_path / "o"),
+               "--expression-regions", "4", "--expression-transfer", "linear"])
+    assert rc == 0, capsys.readouterr()
+    rep = json.loads((tmp_path / "o" / "jaw.json").read_text())
+    assert rep["expressions"]["coefficients"]["jawOpen"] > 0.5

@@ -173,6 +173,13 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
             "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions-detail", "Regional expression weights on a person with detail outside the "
+           "identity space (seed 0)",
+           ("registration/regions_detail/rig.csv", "registration/regions_detail/rig.md",
+            "registration/regions_detail/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons detail --fit-modes 100 "
+            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_detail",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-attribution-seed1", "Where the registered rig's held-out excess comes from (seed 1): "
            "the ratio with the neutral, the motion or one of ICT's vertex ranges made exact",
            ("registration/attribution_seed1/rig.csv", "registration/attribution_seed1/rig.md",

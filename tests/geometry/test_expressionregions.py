@@ -75,8 +75,22 @@ def test_expression_of_varying_strength_is_registered_through_regions(after):
     assert p95[12] < 0.5 * p95[0] and p95[12] < 0.1, p95
 
 
-def test_regions_off_is_the_whole_expression_fit():
-    assert RegistrationOptions().expression_regions.count == 0
+def test_regions_are_on_by_default_and_zero_turns_them_off():
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    assert RegistrationOptions().expression_regions.count == 12
+    w = np.zeros(len(rig.names))
+    w[rig.names.index("jawOpen")] = 0.6
+    S0, G0, _, _ = as_scan(T, F, seed=2)
+    S, G, _, _ = as_scan(_varying(rig, w), F, seed=3)
+    fits = []
+    for opts in (RegistrationOptions(expression_regions=RegionOptions(count=0)), RegistrationOptions()):
+        reg = Registration(T, F, opts, expressions=ShapeBasis(rig.names, rig.deltas, "test"))
+        neutral = reg.register(S0, G0).vertices
+        fits.append(reg.register(S, G, start=neutral, expressions=reg.person_expressions(neutral, "linear")).model)
+    # count 0 is the whole fit alone: its iterations; the default adds the regional loop's
+    assert fits[1].iterations > fits[0].iterations
+    np.testing.assert_allclose(fits[1].coefficients, fits[0].coefficients)  # the whole weights are reported
 
 
 @pytest.mark.parametrize("kw, match", [

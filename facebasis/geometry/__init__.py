@@ -24,6 +24,7 @@ nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closes
 registration  scans of any topology to meshes in the template's topology (rigid + model fit + non-rigid ICP)
 registerfiles  registering scan files: inputs checked before any work, outputs written atomically
 shapemodel  identity and expression bases: fitting a scan in a linear shape space (pose + bounded coefficients)
+expressionregions  one expression weight per soft region (a person's expression whose strength varies over the face)
 normalstage  offsets along a fitted model's normals only (after a shape-model fit: a detail stage that cannot slide)
 scanlandmarks  landmarks found on a scan: front render, a 2D detector object, ray lift onto the surface
 raster      flat-shaded numpy rasterisation of a mesh into an image (preview videos; no OpenGL)

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, MeshError
+from .expressionregions import RegionOptions, expression_fit
 from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .normalstage import NormalStageOptions, normal_displacement
@@ -68,11 +69,12 @@ class RegistrationOptions:
         ``"normal"`` (offsets along the fitted model's normals only, :mod:`.normalstage`: cannot
         slide) or ``"nricp+normal"`` (both, in this order)
     normal_stage : the normal stage's options
+    expression_regions : then one weight per soft region (:mod:`.expressionregions`; count 0: whole only)
     auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
         non-rigid stage's landmark weights
     expression_max : upper bound of the expression weights (lower bound 0). Above 1: a person's
-        expression may be stronger than the template's (ICT person of ``problems.generation``, its
-        jawOpen 1.4 x the template's: p95 0.57 cm with weights in [0, 1], 0.21 cm in [0, 1.5])
+        expression may be stronger than the template's (ICT person of ``problems.generation``: jawOpen 1.4 x
+        the template's, p95 0.57 cm with weights in [0, 1], 0.21 cm in [0, 1.5])
     """
 
     rigid: RigidOptions = field(default_factory=RigidOptions)
@@ -87,6 +89,7 @@ class RegistrationOptions:
     auto_landmark_weight: float = 0.1
     after_model: str = "nricp"
     normal_stage: NormalStageOptions = field(default_factory=NormalStageOptions)
+    expression_regions: RegionOptions = field(default_factory=RegionOptions)
 
     def __post_init__(self):
         if self.after_model not in AFTER_MODEL:
@@ -100,7 +103,7 @@ class RegistrationResult:
     Attributes
     ----------
     vertices : (n, 3) the template's topology laid on the scan, in the scan's frame and units
-    similarity : template -> scan similarity found by the rigid stage
+    similarity : template -> scan similarity of the rigid stage (after a model fit: ``model.pose.then(similarity)``)
     distance : (n,) distance of each vertex to the scan surface (scan units)
     no_surface : (n,) bool, vertices that found no usable scan surface (followed the stiffness term)
     iterations : non-rigid ICP iterations over all stiffness levels
@@ -320,9 +323,8 @@ class Registration:
             in any frame); default the template neutral (then fitted in the identity basis first,
             if the template has one)
         name : the scan's name in messages
-        expressions : (K, n, 3) expression displacements in ``start``'s frame
-            (:meth:`person_expressions`): the scan is first fitted as ``start`` plus a combination of
-            them, weights in [0, 1]
+        expressions : (K, n, 3) expression displacements in ``start``'s frame (:meth:`person_expressions`): the
+            scan is first fitted as ``start`` plus a combination of them (weights in ``[0, expression_max]``)
 
         Returns
         -------
@@ -420,19 +422,16 @@ class Registration:
         return (idx[ok], pts[ok], len(idx)) if ok.sum() >= 3 else (None, None, len(idx))
 
     def _fit_model(self, P, surface_t, h, from_template: bool, expressions):
-        """The identity fit (from the template, with a basis) or the expression fit (with
-        ``expressions``) of :mod:`.shapemodel`; ``(None, None, ())`` otherwise."""
+        """The identity fit (from the template, with a basis) or the expression fit (with ``expressions``;
+        :mod:`.shapemodel`, :mod:`.expressionregions`) as ``(fit, kind, names)``; ``(None, None, ())`` otherwise."""
         normals = self.nricp.vertex_normals
         if from_template and self.identity is not None:
             fit = fit_shape_model(P, self.identity.deltas, surface_t, normals, h, self.options.identity_fit,
                                   use=self.skin)
             return fit, "identity", tuple(self.identity.names)
         if expressions is not None:
-            fit = fit_shape_model(P, np.asarray(expressions, float), surface_t, normals, h, self.options.expression_fit,
-                                  bounds=(0.0, self.options.expression_max), use=self.skin)
-            names = tuple(self.expressions.names) if self.expressions is not None and \
-                len(self.expressions.names) == len(expressions) else tuple(f"e{k}" for k in range(len(expressions)))
-            return fit, "expressions", names
+            return expression_fit(P, np.asarray(expressions, float), surface_t, normals, h, self.options, self.skin,
+                                  self.expressions)
         return None, None, ()
 
 

@@ -64,7 +64,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError, named_params
+from ..errors import InputError, named_params, parameter_error
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
@@ -250,7 +250,7 @@ class RigRetargeter:
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
                  first_frame_neutral: bool | None = None, identity: str | None = None,
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
-                 sparsity: float = DEFAULT_SPARSITY):
+                 sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -285,6 +285,9 @@ class RigRetargeter:
             if not np.isfinite(v) or v < 0:
                 raise InputError(f"{name}: expected a finite number >= 0, found {v}")
         self.contour_slide = float(contour_slide)
+        if not isinstance(rest_anchor, (bool, np.bool_)):
+            raise parameter_error("rest_anchor", "True or False", repr(rest_anchor))
+        self.rest_anchor = bool(rest_anchor)
         self.sparsity = float(sparsity)
         ipopt = None
         if solver == "ipopt":
@@ -354,8 +357,10 @@ class RigRetargeter:
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):
-            calibrate = calibrate_auto if self.identity == "auto" else calibrate_identity
-            calibration = calibrate(model, landmarks, visible)
+            if self.identity == "auto":
+                calibration = calibrate_auto(model, landmarks, visible, anchor=self.rest_anchor)
+            else:
+                calibration = calibrate_identity(model, landmarks, visible)
             model = model.with_neutral(calibration.neutral)
         if self.auto:
             if calibration is not None and np.isfinite(calibration.noise):

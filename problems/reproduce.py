@@ -64,6 +64,13 @@ CAPTURES = ("{python} -m facebasis.cli capture {shared}/data/video/cap12_edit.mp
             "--out {tmp}/cap12_edit_det",
             "{python} -m facebasis.cli capture {shared}/data/video/cap13_edit2.mp4 --detector dlib --no-overlay "
             "--out {tmp}/cap13_edit2_det")
+#: tracking-only captures (no detector after frame 0) of the two clips, seeded by dlib's frame-0 landmarks
+TRACKED = tuple(
+    cmd for clip in ("cap12_edit", "cap13_edit2") for cmd in (
+        f"{{python}} -m facebasis.cli landmarks {{shared}}/data/video/{clip}.mp4 --detector dlib "
+        f"--out {{tmp}}/{clip}_first.pts",
+        f"{{python}} -m facebasis.cli capture {{shared}}/data/video/{clip}.mp4 --landmarks {{tmp}}/{clip}_first.pts "
+        f"--no-overlay --out {{tmp}}/{clip}_track"))
 
 RECIPES: tuple[Recipe, ...] = (
     Recipe("default", "Studies (alpha, lambda, alpha x lambda, noise, methods), one rig run and its report, error "
@@ -199,8 +206,9 @@ RECIPES: tuple[Recipe, ...] = (
            data=("ict",), script="problems/bench_retarget.py"),
     Recipe("plausibility", "Rig weights on calm frames of the real clips and on synthetic ICT identities",
            ("retarget/plausibility.csv",),
-           CAPTURES + (f"{PY} problems.rig_plausibility {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det --synthetic "
-                       "--frames 600 --out reports/retarget/plausibility.csv",),
+           CAPTURES + TRACKED + (f"{PY} problems.rig_plausibility {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
+                                 "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --starts 0,7 --synthetic "
+                                 "--frames 600 --out reports/retarget/plausibility.csv",),
            data=("ict", "video", "detect"), script="problems/rig_plausibility.py"),
     Recipe("real-clips", "The shared clips captured, retargeted onto ICT and animated on the cartoon: residuals, "
            "weights, inner lips, speed; weight plots and cartoon strips",

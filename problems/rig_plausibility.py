@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
     "before": {"identity": "quantile", "contour_slide": 1.0, "sparsity": 0.0},   # the defaults before issue 23
     "default": {},
+    "no_anchor": {"rest_anchor": False},                      # rest face: the commonest posture, never frame 0's
     "no_rest_face": {"identity": "quantile"},                 # identity: the quantile baseline only
     "no_contour": {"contour_slide": 1.0},                     # noise model: jaw line as fixed points
     "no_sparsity": {"sparsity": 0.0},                         # prior: Gaussian ridge only
@@ -104,6 +105,13 @@ def plausibility(names, W, landmarks) -> dict:
         if n in names:
             out[f"{n}_{f}"] = float(getattr(np, f)(W[:, names.index(n)]))
     out["mean_weight"] = float(W.mean())
+    if "jawOpen" in names and np.asarray(landmarks).shape[1] == 68:
+        # the rig still follows the face: jawOpen against the lip opening the landmarks show
+        # (inner lips 62-66 over the jaw width), Pearson correlation over all frames
+        P = np.asarray(landmarks, np.float64)
+        opening = np.linalg.norm(P[:, 62] - P[:, 66], axis=1) / np.linalg.norm(P[:, 0] - P[:, 16], axis=1)
+        jaw = W[:, names.index("jawOpen")]
+        out["jawOpen_opening_corr"] = float(np.corrcoef(jaw, opening)[0, 1]) if jaw.std() > 0 else 0.0
     return out
 
 
@@ -113,19 +121,37 @@ def ict_problem():
     return ict_rig(), _load()["landmarks68"].astype(np.int64)
 
 
-def run_capture(capture_dir, variants, log=print) -> list[dict]:
+def cut_rest(W, landmarks, first: int) -> dict:
+    """A cut's weights W (T - first, k) on the frames that are calm against the whole clip's frame 0
+    (landmarks (T, 68, 2)): a reference rest that does not depend on the cut's own frame 0 (which may
+    be mid-sentence). Median over them of the largest weight, and their count; {} for the whole clip."""
+    if not first:
+        return {}
+    calm = calm_frames(landmarks)[first:]
+    return {"clip_calm_frames": int(calm.sum()),
+            "clip_calm_max_median": float(np.median(np.asarray(W)[calm].max(1))) if calm.any() else float("nan")}
+
+
+def run_capture(capture_dir, variants, start: float = 0.0, log=print) -> list[dict]:
+    """Rows of every variant on a capture folder; ``start`` > 0 (seconds) cuts the capture there, a take
+    whose frame 0 is a later moment of the clip (e.g. mid-sentence)."""
     from facebasis.capture.trackfile import read_capture
     from facebasis.retarget.rigdrive import RigRetargeter
 
     rig, idx = ict_problem()
     cap = read_capture(capture_dir)
+    first = int(round(start * cap.fps))
+    P, lost = cap.landmarks[first:], cap.lost[first:]
+    label = Path(capture_dir).name + (f"@{start:g}s" if first else "")
     rows = []
     for name in variants:
         t0 = time.process_time()
-        res = RigRetargeter(rig, idx, **VARIANTS[name]).run(cap.landmarks, cap.lost, cap.fps)
-        row = {"capture": Path(capture_dir).name, "variant": name, **plausibility(rig.names, res.weights, cap.landmarks),
+        res = RigRetargeter(rig, idx, **VARIANTS[name]).run(P, lost, cap.fps)
+        row = {"capture": label, "variant": name, **plausibility(rig.names, res.weights, P),
                "residual_px_mean": float(np.nanmean(res.residual)), "ridge": res.ridge,
-               "cpu_ms_per_frame": 1e3 * (time.process_time() - t0) / cap.n_frames}
+               "rest_anchored": bool(res.calibration is not None and res.calibration.rest_anchored),
+               **cut_rest(res.weights, cap.landmarks, first),
+               "cpu_ms_per_frame": 1e3 * (time.process_time() - t0) / len(P)}
         rows.append(row)
         log(format_row(row))
     return rows
@@ -135,8 +161,11 @@ def format_row(r) -> str:
     return (f"{r['capture']:>14s} {r['variant']:>22s}: calm {r['calm_frames']:4d}/{r['frames']} max-weight median "
             f"{r['calm_max_median']:.3f} ({r['calm_argmax']}); L/R diff median {r['lr_diff_median']:.3f}; "
             f"cheekPuff_L mean {r.get('cheekPuff_L_mean', np.nan):.3f}; jawRight max {r.get('jawRight_max', np.nan):.3f}; "
+            f"jawOpen~opening r {r.get('jawOpen_opening_corr', np.nan):.2f}; "
             f"residual {r['residual_px_mean']:.2f} px; ridge {r['ridge']:.3g}"
             + (f"; weight MAE {r['weight_mae']:.4f}" if "weight_mae" in r else "")
+            + (f"; on the clip's calm frames ({r['clip_calm_frames']}) max-weight median {r['clip_calm_max_median']:.3f}"
+               if "clip_calm_frames" in r else "")
             + f"; {r['cpu_ms_per_frame']:.1f} ms/frame CPU")
 
 
@@ -205,14 +234,17 @@ def main(argv=None) -> int:
     ap.add_argument("--synthetic", action="store_true")
     ap.add_argument("--frames", type=int, default=600)
     ap.add_argument("--out", default=None, help="CSV of the rows")
+    ap.add_argument("--starts", default="0", help="comma-separated start times (s) of cuts of every capture")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v]
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         ap.error(f"--variants: unknown {unknown}, expected some of {list(VARIANTS)}")
     rows = []
+    starts = [float(v) for v in args.starts.split(",") if v]
     for c in args.captures:
-        rows += run_capture(c, variants)
+        for start in starts:
+            rows += run_capture(c, variants, start)
     if args.synthetic:
         rows += run_synthetic(variants, frames=args.frames)
     if args.out and rows:

@@ -50,6 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .framefit import FrameSolver
+from .onesided import negative_demand
 from .pose import PI, fit_pose_affine, fit_pose_gn
 
 #: pilot frames (evenly spaced) of the calibration
@@ -94,6 +95,7 @@ class IdentityCalibration:
         nothing is applied: offset and baseline are 0 and rms_after, noise those of the rig's neutral)
     rest_applied, quantile_applied : ``identity="auto"``: which of its two steps was kept (the rest
         face, :func:`calibrate_rest`; the quantile baseline on top of it, :func:`calibrate_identity`)
+    rest_anchored : the rest face is the posture of the capture's first frame (:func:`rest_frames`)
     neutral : (L, 3) the calibrated neutral landmarks: the solver's ``v0`` plus ``offset``, as the
         rounds added it up (kept beside ``offset`` so that a solver built on it is bit for bit the
         one the calibration measured; ``v0 + offset`` may differ in the last bit). None only when
@@ -110,6 +112,7 @@ class IdentityCalibration:
     rest_applied: bool = False
     quantile_applied: bool = False
     neutral: np.ndarray | None = None
+    rest_anchored: bool = False
 
 
 def pilot_frames(visible, n: int = CALIBRATION_FRAMES) -> np.ndarray:
@@ -233,6 +236,14 @@ REST_SHARE = 0.25
 REST_MIN_GAIN = 0.02
 #: pilot frames of the rest calibration (evenly spaced)
 REST_FRAMES = 100
+#: the first frame's rest face is kept only if its pilot fits' negative-weight demand (:mod:`.onesided`)
+#: is at most this multiple of the commonest posture's: the demand of landmark noise alone is
+#: ~0.1 rig units^2 for any neutral on the real clips, a first frame mid-sentence multiplies it by 2-7
+#: (reports/retarget/plausibility.md)
+ANCHOR_DEMAND_RATIO = 1.25
+#: the first frame's posture is taken as the rest face (the median of the pilot faces around it) when
+#: at least this fraction of the densest cluster's size lies within that cluster's radius of it
+REST_ANCHOR_MIN = 0.2
 
 
 def rest_offsets(solver, landmarks, visible, frames, poses=None):
@@ -259,14 +270,44 @@ def rest_offsets(solver, landmarks, visible, frames, poses=None):
     return out, new_poses, rms
 
 
+def _distances(offsets) -> np.ndarray:
+    """(F, F) rms landmark distances between the in-plane offsets (F, L, 3) of the frames."""
+    Z = np.nan_to_num(offsets[:, :, :2].reshape(len(offsets), -1))
+    return np.sqrt(np.maximum(((Z[:, None] - Z[None]) ** 2).mean(2), 0.0))     # F <= REST_FRAMES
+
+
 def densest_frames(offsets, share: float = REST_SHARE) -> np.ndarray:
     """Indices of the densest ``share`` of the frames: the frame whose ``K = share F`` nearest
-    neighbours (rms landmark distance of the offsets (F, L, 3)) are closest, and those neighbours."""
-    Z = np.nan_to_num(offsets[:, :, :2].reshape(len(offsets), -1))
-    d = np.sqrt(np.maximum(((Z[:, None] - Z[None]) ** 2).mean(2), 0.0))     # (F, F), F <= REST_FRAMES
-    K = min(len(Z), max(3, int(round(share * len(Z)))))
+    neighbours (rms landmark distance of the offsets (F, L, 3)) are closest, and those neighbours
+    (the frame itself first)."""
+    d = _distances(offsets)
+    K = min(len(d), max(3, int(round(share * len(d)))))
     near = np.argsort(d, axis=1, kind="stable")[:, :K]
     return near[np.argmin(np.take_along_axis(d, near, 1).mean(1))]
+
+
+def rest_frames(offsets, share: float = REST_SHARE, anchor: int | None = None,
+                min_share: float = REST_ANCHOR_MIN) -> tuple[np.ndarray, bool]:
+    """The frames whose median is the rest face, and whether they are the anchor's.
+
+    Without ``anchor``: :func:`densest_frames`. With ``anchor`` (a frame index: the capture's first
+    frame in :func:`calibrate_rest`): the frames within the densest cluster's radius (the distance
+    of its ``K``-th member from its centre) of the anchor, the anchor included, if there are at
+    least ``max(3, min_share K)`` of them, i.e. the anchor's posture recurs about as densely as the
+    capture's commonest posture; else :func:`densest_frames`. A take usually starts at rest
+    (the classic first-frame neutral) while a talking clip's commonest posture is speech (lips
+    parted): when the first frame's posture recurs, it is the rest face; when it does not (a take
+    that starts on an expression), the commonest posture is.
+
+    Returns (indices, anchored)."""
+    dense = densest_frames(offsets, share)
+    if anchor is None:
+        return dense, False
+    d = _distances(offsets)
+    around = np.flatnonzero(d[anchor] <= d[dense[0], dense[-1]])
+    if len(around) >= max(3, min_share * len(dense)):
+        return around, True
+    return dense, False
 
 
 def _fitted_rms(solver: FrameSolver, landmarks, visible, frames) -> float:
@@ -278,7 +319,8 @@ def _fitted_rms(solver: FrameSolver, landmarks, visible, frames) -> float:
 
 
 def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST_FRAMES,
-                   rounds: int = CALIBRATION_ROUNDS, share: float = REST_SHARE) -> IdentityCalibration:
+                   rounds: int = CALIBRATION_ROUNDS, share: float = REST_SHARE,
+                   anchor: bool = False) -> IdentityCalibration:
     """The person's rest face: the densest cluster of the capture's pose-normalised faces.
 
     A face at rest is where a capture spends most of its time, and comes back to between
@@ -312,7 +354,8 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     moved = solver
     for _ in range(rounds):
         O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
-        off = np.nan_to_num(np.nanmedian(O[densest_frames(O, share)], axis=0))
+        near, anchored = rest_frames(O, share, 0 if anchor else None)
+        off = np.nan_to_num(np.nanmedian(O[near], axis=0))
         off[:, 2] = 0.0
         moved = moved.shifted(off)
     after = _fitted_rms(moved, P, vis, check)
@@ -320,30 +363,51 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, before, before, float("nan"), False,
                                    neutral=v_start)
     return IdentityCalibration(moved.v0 - v_start, np.zeros(k), frames, before, after, float("nan"), True,
-                               neutral=moved.v0)
+                               neutral=moved.v0, rest_anchored=anchored)
 
 
-def calibrate_auto(solver: FrameSolver, landmarks, visible) -> IdentityCalibration:
-    """``identity="auto"``: the quantile baseline (:func:`calibrate_identity`) on the rig's neutral,
-    and on the rest face (:func:`calibrate_rest`); the one whose full pilot fits (pose and weights,
-    the same pilot frames) leave the lower median residual is returned (its ``neutral``);
-    ``solver`` is left as it is.
+def _one_sided(solver: FrameSolver, first, common, landmarks, visible) -> bool:
+    """True if the neutral ``first`` (L, 3) demands no more negative weight (:mod:`.onesided`, median
+    over the pilot frames) than :data:`ANCHOR_DEMAND_RATIO` times the neutral ``common``."""
+    frames = pilot_frames(visible, CALIBRATION_FRAMES)
+    a = np.nanmedian(negative_demand(solver.with_neutral(first), landmarks, visible, frames))
+    b = np.nanmedian(negative_demand(solver.with_neutral(common), landmarks, visible, frames))
+    return bool(a <= ANCHOR_DEMAND_RATIO * b)
 
-    The rest face assumes the capture comes back to a face at rest; a capture that never does (every
-    frame some expression) moves it into an expression, after which frames need negative weights and
-    fit worse than with the quantile baseline alone, which is then kept.
+
+def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True) -> IdentityCalibration:
+    """``identity="auto"``: the person's neutral from the capture; ``solver`` is left as it is.
+
+    1. The commonest posture: the quantile baseline (:func:`calibrate_identity`) on the rig's
+       neutral, and on the rest face of the densest cluster (:func:`calibrate_rest` without anchor);
+       the one whose full pilot fits (pose and weights, the same pilot frames) leave the lower median
+       residual. The rest face assumes the capture comes back to a face at rest; a capture that
+       never does (every frame some expression) moves it into an expression, after which frames need
+       negative weights and fit worse than with the quantile baseline alone, which is then kept.
+    2. With ``anchor`` (the default), the first frame's posture (:func:`calibrate_rest` anchored,
+       :func:`rest_frames`) replaces it when that posture recurs through the capture and, as a
+       neutral, demands no more negative weight than :data:`ANCHOR_DEMAND_RATIO` times the neutral of
+       step 1 (:func:`.onesided.negative_demand`: a rig's shapes are one-sided, so the rest face is
+       the one from which the capture's faces are reached with weights >= 0). A talking clip's
+       commonest posture is speech (lips parted), not rest: with it as the neutral, closed lips read
+       as an expression (mouthStretch on cap13's calm start). A take that starts mid-sentence or on an
+       expression fails the demand test (2-7 times the demand on the real clips' cuts) and keeps step 1.
     """
     v_start = solver.v0
     quant = calibrate_identity(solver, landmarks, visible)
-    quant = replace(quant, quantile_applied=quant.applied)
-    rest = calibrate_rest(solver, landmarks, visible)
-    if not rest.applied:
-        return quant
-    both = calibrate_identity(solver.with_neutral(rest.neutral), landmarks, visible)   # the baseline on the rest face
-    if not both.rms_after < quant.rms_after:
-        return quant
-    return IdentityCalibration(both.neutral - v_start, both.baseline, both.frames, quant.rms_before, both.rms_after,
-                               both.noise, True, True, both.applied, neutral=both.neutral)
+    common = replace(quant, quantile_applied=quant.applied)
+    rest = calibrate_rest(solver, landmarks, visible, anchor=False)
+    if rest.applied:
+        both = calibrate_identity(solver.with_neutral(rest.neutral), landmarks, visible)   # the baseline on the rest face
+        if both.rms_after < quant.rms_after:
+            common = IdentityCalibration(both.neutral - v_start, both.baseline, both.frames, quant.rms_before,
+                                         both.rms_after, both.noise, True, True, both.applied, neutral=both.neutral)
+    if anchor:
+        first = calibrate_rest(solver, landmarks, visible, anchor=True)
+        if first.applied and first.rest_anchored and _one_sided(solver, first.neutral, common.neutral, landmarks,
+                                                                visible):
+            return replace(first, rest_applied=True)
+    return common
 
 
 __all__ = ["IdentityCalibration", "calibrate_auto", "calibrate_identity", "calibrate_rest", "first_frame_offset", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES", "pilot_frames", "back_project", "CALIBRATION_FRAMES",

@@ -64,7 +64,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError, named_params
+from ..errors import InputError, named_params, parameter_error
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
@@ -244,13 +244,16 @@ class RigRetargeter:
         1 measures it as every other landmark), see :func:`.pose.contour_weights`
     sparsity : the exponential part of the weight prior, ``sparsity * rho * sum_i x_i``
         (:data:`DEFAULT_SPARSITY`; 0 leaves the Gaussian ridge alone)
+    rest_anchor : ``identity="auto"``: take the first frame's posture as the rest face when it recurs
+        and is one-sided enough (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps
+        the capture's commonest posture (the default before it)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
                  first_frame_neutral: bool | None = None, identity: str | None = None,
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
-                 sparsity: float = DEFAULT_SPARSITY):
+                 sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -285,6 +288,9 @@ class RigRetargeter:
             if not np.isfinite(v) or v < 0:
                 raise InputError(f"{name}: expected a finite number >= 0, found {v}")
         self.contour_slide = float(contour_slide)
+        if not isinstance(rest_anchor, (bool, np.bool_)):
+            raise parameter_error("rest_anchor", "True or False", repr(rest_anchor))
+        self.rest_anchor = bool(rest_anchor)
         self.sparsity = float(sparsity)
         ipopt = None
         if solver == "ipopt":
@@ -354,8 +360,10 @@ class RigRetargeter:
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):
-            calibrate = calibrate_auto if self.identity == "auto" else calibrate_identity
-            calibration = calibrate(model, landmarks, visible)
+            if self.identity == "auto":
+                calibration = calibrate_auto(model, landmarks, visible, anchor=self.rest_anchor)
+            else:
+                calibration = calibrate_identity(model, landmarks, visible)
             model = model.with_neutral(calibration.neutral)
         if self.auto:
             if calibration is not None and np.isfinite(calibration.noise):

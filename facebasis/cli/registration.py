@@ -27,7 +27,10 @@ def cmd_register(args) -> int:
         det = get_detector(args.detector or available_detector(), video=False)
     from ..geometry.registration import RegistrationOptions
 
-    opts = RegistrationOptions(after_model=args.after_model or "nricp")
+    from ..geometry.detailprior import DetailPriorOptions
+
+    opts = RegistrationOptions(after_model=args.after_model or "nricp",
+                               detail=DetailPriorOptions(modes=0) if args.detail_prior == "off" else DetailPriorOptions())
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -61,6 +64,10 @@ def register(subparsers) -> None:
                         "the fitted model's normals only (cannot slide along the skin: a person's detail outside "
                         "the identity space without moving correspondence), or both in this order; without a basis "
                         "the non-rigid ICP runs as always")
+    p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
+                   help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
+                        "what the identity space cannot express is left to that field instead of sliding the "
+                        "fitted points along the skin; 'off': the modes alone")
     p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
                    help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",

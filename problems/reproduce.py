@@ -161,6 +161,13 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 60 "
             "--after-model normal --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
+           "the baseline of the seed-1 table's 60-mode rows",
+           ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",
+            "registration/normal_stage_seed1_modes_only/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 60 "
+            "--after-model normal --detail-modes 0 --out reports/registration/normal_stage_seed1_modes_only",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",
            ("retarget/retarget_table.csv", "retarget/retarget_table.md", "retarget/identity_table.csv",

@@ -162,37 +162,44 @@ RECIPES: tuple[Recipe, ...] = (
             "registration/normal_stage/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --after-model normal "
             "--out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
-    Recipe("registration-rig-seed1", "Both stages after the fits on a second person (seed 1, 100 modes)",
+    Recipe("registration-rig-seed1", "The normal stage after the fits on a second person (seed 1, 100 and 60 modes)",
            ("registration/normal_stage_seed1/rig.csv", "registration/normal_stage_seed1/rig.md",
             "registration/normal_stage_seed1/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 "
-            "--after-model nricp normal --out reports/registration/normal_stage_seed1",), data=("ict",),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 60 "
+            "--after-model normal --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
            "in-space person, seed 0; per-part errors in the rig's frame",
            ("registration/regions/rig.csv", "registration/regions/rig.md", "registration/regions/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons in-space --fit-modes 100 "
-            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions",), data=("ict",),
+            "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions-seed1", "The same on a second person (seed 1)",
            ("registration/regions_seed1/rig.csv", "registration/regions_seed1/rig.md",
             "registration/regions_seed1/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
-            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_seed1",),
+            "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions-detail", "Regional expression weights on a person with detail outside the "
            "identity space (seed 0)",
            ("registration/regions_detail/rig.csv", "registration/regions_detail/rig.md",
             "registration/regions_detail/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons detail --fit-modes 100 "
-            "--after-model normal --regions 0 12 --no-baseline --out reports/registration/regions_detail",),
+            "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions_detail",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-attribution-seed1", "Where the registered rig's held-out excess comes from (seed 1): "
            "the ratio with the neutral, the motion or one of ICT's vertex ranges made exact",
            ("registration/attribution_seed1/rig.csv", "registration/attribution_seed1/rig.md",
             "registration/attribution_seed1/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
-            "--after-model normal --no-baseline --attribution --out reports/registration/attribution_seed1",),
+            "--after-model normal --no-baseline --attribution --detail-modes 0 --out reports/registration/attribution_seed1",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
+           "the baseline of the seed-1 table's 60-mode rows",
+           ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",
+            "registration/normal_stage_seed1_modes_only/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 60 "
+            "--after-model normal --detail-modes 0 --out reports/registration/normal_stage_seed1_modes_only",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",

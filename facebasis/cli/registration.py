@@ -25,12 +25,14 @@ def cmd_register(args) -> int:
         from ..capture.detect import available_detector, get_detector
 
         det = get_detector(args.detector or available_detector(), video=False)
+    from ..geometry.detailprior import DetailPriorOptions
     from ..geometry.expressionregions import RegionOptions
     from ..geometry.registration import RegistrationOptions
 
     opts = RegistrationOptions(after_model=args.after_model or "nricp",
                                expression_regions=RegionOptions(
-                                   count=12 if args.expression_regions is None else args.expression_regions))
+                                   count=12 if args.expression_regions is None else args.expression_regions),
+                               detail=DetailPriorOptions(modes=0) if args.detail_prior == "off" else DetailPriorOptions())
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -68,6 +70,10 @@ def register(subparsers) -> None:
                    help="after the expression fit, one weight per expression in each of N soft regions placed over "
                         "the expressions' supports (a person's expression whose strength varies over the face, e.g. "
                         "a jaw opening further on one side); default 12; 0: whole expressions only")
+    p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
+                   help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
+                        "what the identity space cannot express is left to that field instead of sliding the "
+                        "fitted points along the skin; 'off': the modes alone")
     p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
                    help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",

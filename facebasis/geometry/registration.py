@@ -38,6 +38,7 @@ from ..errors import InputError, MeshError
 from .expressionregions import RegionOptions, expression_fit
 from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
+from .detailprior import DetailPriorOptions, identity_fit_with_detail
 from .normalstage import NormalStageOptions, normal_displacement
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
@@ -62,7 +63,7 @@ class RegistrationOptions:
         rotations, as skin moving over the same face stretches little)
     unit_ratio : refuse scans whose size differs from the template's by more than this factor
     identity_fit : the identity-space fit of a neutral scan (:mod:`.shapemodel`), when the template
-        has an identity basis
+        has an identity basis; ``detail``: its prior on detail outside the space (:mod:`.detailprior`)
     expression_fit : the expression fit of an expression scan, when expressions are given
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
     after_model : the stage after either fit: ``"nricp"`` (free non-rigid ICP, ``nricp_after_model``),
@@ -90,6 +91,7 @@ class RegistrationOptions:
     after_model: str = "nricp"
     normal_stage: NormalStageOptions = field(default_factory=NormalStageOptions)
     expression_regions: RegionOptions = field(default_factory=RegionOptions)
+    detail: DetailPriorOptions = field(default_factory=DetailPriorOptions)
 
     def __post_init__(self):
         if self.after_model not in AFTER_MODEL:
@@ -177,8 +179,7 @@ def check_landmarks(template_landmarks, scan_landmarks, n_template: int, n_scan:
     """
     t = np.asarray(template_landmarks)
     if t.ndim != 1 or not (np.issubdtype(t.dtype, np.integer) or (t.size and np.all(np.mod(t, 1) == 0))):
-        raise InputError(f"{template_name}: expected a list of template vertex indices, found shape "
-                         f"{t.shape} of {t.dtype}")
+        raise InputError(f"{template_name}: expected a list of template vertex indices, found shape {t.shape} of {t.dtype}")
     t = t.astype(np.int64)
     s = np.asarray(scan_landmarks, dtype=np.float64) if scan_landmarks is not None else None
     if s is not None and len(s) != len(t):
@@ -368,10 +369,9 @@ class Registration:
         if model is not None:
             P, opts = model.vertices, self.options.nricp_after_model
             h = median_edge_length(P, self.F)
-        if auto:
+        if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
             lm_idx, lm_t, found = self._auto_landmarks(P, surface_t, F, h, start is not None)
             lm_pts = sim.apply(lm_t) if lm_t is not None else None
-        if auto:  # detections on an untextured render are ~1 cm apart from one face to another: weak pull
             opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
                                                                    for w in opts.landmark_weight))
         res = self._refine(P, surface_t, opts, lm_idx, lm_t, h, model is not None)
@@ -428,7 +428,7 @@ class Registration:
         if from_template and self.identity is not None:
             fit = fit_shape_model(P, self.identity.deltas, surface_t, normals, h, self.options.identity_fit,
                                   use=self.skin)
-            return fit, "identity", tuple(self.identity.names)
+            return identity_fit_with_detail(self, fit, P, surface_t, h), "identity", tuple(self.identity.names)
         if expressions is not None:
             return expression_fit(P, np.asarray(expressions, float), surface_t, normals, h, self.options, self.skin,
                                   self.expressions)

@@ -194,6 +194,12 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --fit-modes 100 "
             "--after-model normal --no-baseline --attribution --detail-modes 0 --out reports/registration/attribution_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-defaults", "The registration's defaults (detail prior, 12 regions) with either stage "
+           "after the fits, both persons, seeds 0 and 1",
+           tuple(f"registration/defaults_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --train 12 --no-baseline "
+                 f"--fit-modes 100 --after-model nricp normal --regions 12 --out reports/registration/defaults_seed{s}"
+                 for s in (0, 1)), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

@@ -29,7 +29,7 @@ def cmd_register(args) -> int:
     from ..geometry.expressionregions import RegionOptions
     from ..geometry.registration import RegistrationOptions
 
-    opts = RegistrationOptions(after_model=args.after_model or "nricp",
+    opts = RegistrationOptions(after_model=args.after_model or "normal",
                                expression_regions=RegionOptions(
                                    count=12 if args.expression_regions is None else args.expression_regions),
                                detail=DetailPriorOptions(modes=0) if args.detail_prior == "off" else DetailPriorOptions())
@@ -62,9 +62,9 @@ def register(subparsers) -> None:
                    help="how the expression basis is carried onto the person's registered neutral: deformation "
                         "transfer (default) or the template's displacements as they are (ICT-FaceKit's own convention)")
     p.add_argument("--after-model", default=None, action=Once, choices=("nricp", "normal", "nricp+normal"),
-                   help="the stage after the identity or expression fit: free non-rigid ICP (default), offsets along "
-                        "the fitted model's normals only (cannot slide along the skin: a person's detail outside "
-                        "the identity space without moving correspondence), or both in this order; without a basis "
+                   help="the stage after the identity or expression fit: offsets along the fitted model's normals "
+                        "only (default; cannot slide along the skin: a person's detail outside the identity space "
+                        "without moving correspondence), free non-rigid ICP, or both in this order; without a basis "
                         "the non-rigid ICP runs as always")
     p.add_argument("--expression-regions", default=None, type=int, action=Once, metavar="N",
                    help="after the expression fit, one weight per expression in each of N soft regions placed over "

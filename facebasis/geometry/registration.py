@@ -66,9 +66,9 @@ class RegistrationOptions:
         has an identity basis; ``detail``: its prior on detail outside the space (:mod:`.detailprior`)
     expression_fit : the expression fit of an expression scan, when expressions are given
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
-    after_model : the stage after either fit: ``"nricp"`` (free non-rigid ICP, ``nricp_after_model``),
-        ``"normal"`` (offsets along the fitted model's normals only, :mod:`.normalstage`: cannot
-        slide) or ``"nricp+normal"`` (both, in this order)
+    after_model : the stage after either fit: ``"normal"`` (the default: offsets along the fitted
+        model's normals only, :mod:`.normalstage`: cannot slide), ``"nricp"`` (free non-rigid ICP,
+        ``nricp_after_model``) or ``"nricp+normal"`` (both, in this order)
     normal_stage : the normal stage's options
     expression_regions : then one weight per soft region (:mod:`.expressionregions`; count 0: whole only)
     auto_landmark_weight : landmarks found on the scan (``"auto"``) pull with this times the
@@ -88,7 +88,7 @@ class RegistrationOptions:
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1
-    after_model: str = "nricp"
+    after_model: str = "normal"
     normal_stage: NormalStageOptions = field(default_factory=NormalStageOptions)
     expression_regions: RegionOptions = field(default_factory=RegionOptions)
     detail: DetailPriorOptions = field(default_factory=DetailPriorOptions)

@@ -225,8 +225,16 @@ class OverlayThread:
                     raise self._error
         finally:
             t = time.perf_counter()
-            self._writer.close()
+            if self._error is None:
+                self._writer.close()
+            else:  # the first error is the one to report: closing a writer that failed usually fails too
+                with contextlib.suppress(Exception):
+                    self._writer.close()
             self._secs["output"] += time.perf_counter() - t
+
+
+_SETTINGS_LOCK = threading.Lock()
+_settings_state = {"depth": 0, "saved": None}  # runs inside thread_settings, and what the first one found
 
 
 @contextlib.contextmanager
@@ -234,15 +242,23 @@ def thread_settings(threaded: bool):
     """While the pipeline runs: OpenCV on one thread (its own worker threads only compete with the
     pipeline's on small frames, and cost CPU time spinning on a loaded machine; results are the same)
     and, with background threads, a shorter GIL switch interval (:data:`SWITCH_INTERVAL`). Both are
-    process-wide and restored afterwards."""
+    process-wide: they are saved when the first of overlapping runs starts and restored when the last
+    one ends (a run that ends first must not restore another run's temporary values)."""
     import cv2
 
-    n, interval = cv2.getNumThreads(), sys.getswitchinterval()
-    cv2.setNumThreads(1)
-    if threaded:
-        sys.setswitchinterval(min(interval, SWITCH_INTERVAL))
+    with _SETTINGS_LOCK:
+        if _settings_state["depth"] == 0:
+            _settings_state["saved"] = (cv2.getNumThreads(), sys.getswitchinterval())
+        _settings_state["depth"] += 1
+        cv2.setNumThreads(1)
+        if threaded:
+            sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
     try:
         yield
     finally:
-        cv2.setNumThreads(n)
-        sys.setswitchinterval(interval)
+        with _SETTINGS_LOCK:
+            _settings_state["depth"] -= 1
+            if _settings_state["depth"] == 0:
+                n, interval = _settings_state["saved"]
+                cv2.setNumThreads(n)
+                sys.setswitchinterval(interval)

@@ -66,12 +66,12 @@ class DetailPriorOptions:
     amplitude: float = 2.0
 
     def __post_init__(self):
-        if not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
-            raise InputError(f"detail prior modes: expected an integer >= 0, found {self.modes!r}")
+        if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
+            raise InputError(f"detail.modes: expected an integer >= 0, found {self.modes!r}")
         for k in ("length", "amplitude"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
-                raise InputError(f"detail prior {k}: expected a positive number, found {v!r}")
+                raise InputError(f"detail.{k}: expected a positive number, found {v!r}")
 
 
 class DetailPrior:

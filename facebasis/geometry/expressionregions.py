@@ -77,11 +77,11 @@ class RegionOptions:
         for k in ("width", "sigma"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.number)) and np.isfinite(v) and v > 0):
-                raise parameter_error(f"region_{k}", "a positive number", repr(v))
+                raise parameter_error(f"region_{k}", "a positive number", repr(v), label=f"expression_regions.{k}")
         for k in ("support", "active"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.number)) and 0 <= v < 1):
-                raise parameter_error(f"region_{k}", "a number in [0, 1)", repr(v))
+                raise parameter_error(f"region_{k}", "a number in [0, 1)", repr(v), label=f"expression_regions.{k}")
 
 
 def soft_regions(V: np.ndarray, deltas: np.ndarray, count: int, width: float = 0.6, support: float = 0.05,
@@ -105,6 +105,9 @@ def soft_regions(V: np.ndarray, deltas: np.ndarray, count: int, width: float = 0
     motion = np.linalg.norm(deltas[:, use], axis=2).max(0)
     cand = use[motion > support * motion.max()] if motion.max() > 0 else use
     cand = cand if len(cand) >= count else use
+    if len(np.unique(V[cand], axis=0)) < count:  # farthest-point sampling would repeat a centre (0/0 below)
+        raise parameter_error("expression_regions", f"at most {len(np.unique(V[cand], axis=0))} regions (the "
+                              "distinct vertices that may carry a centre)", str(count))
     P = V[cand]
     # farthest-point sample, from the vertex nearest the supports' centroid (deterministic)
     first = int(np.argmin(((P - P.mean(0)) ** 2).sum(1)))

@@ -151,6 +151,34 @@ def test_reader_and_overlay_thread_units():
     assert len(w.frames) == 5 and w.closed and secs["output"] > 0
 
 
+def test_the_write_error_is_reported_when_closing_the_writer_fails_too():
+    """A writer that failed (disk full) usually fails to close as well: the first error is raised."""
+    class W:
+        def write(self, img):
+            raise OSError("No space left on device")
+
+        def close(self):
+            raise ValueError("cannot close a broken stream")
+
+    o = OverlayThread(W(), np.array([[0, 1, 2]]), {"output": 0.0})
+    o.put(np.zeros((8, 8, 3), np.uint8), np.array([[1.0, 1], [5, 1], [1, 5]]), np.array([[2.0, 2]]))  # queued
+    with pytest.raises(OSError, match="No space left"):
+        o.close()
+
+
+def test_overlapping_runs_restore_the_settings_found_by_the_first():
+    from facebasis.capture.pipeline import thread_settings
+
+    n, interval = cv2.getNumThreads(), sys.getswitchinterval()
+    a, b = thread_settings(True), thread_settings(True)
+    a.__enter__()
+    b.__enter__()
+    a.__exit__(None, None, None)     # the first run ends while the second still runs
+    assert cv2.getNumThreads() == 1  # the second run keeps its settings
+    b.__exit__(None, None, None)
+    assert cv2.getNumThreads() == n and sys.getswitchinterval() == interval
+
+
 @pytest.mark.skipif(not (VIDEO_DIR / "cap13_edit2.mp4").exists(), reason="shared clip not available")
 def test_mediapipe_threaded_capture_is_the_serial_one(tmp_path):
     pytest.importorskip("mediapipe")

@@ -83,10 +83,11 @@ def test_several_parts_follow_the_fit_with_the_detail_prior():
 
 
 @pytest.mark.parametrize("kw, match", [
-    ({"modes": -1}, "detail prior modes: expected an integer >= 0, found -1"),
-    ({"modes": 2.5}, "detail prior modes: expected an integer >= 0, found 2.5"),
-    ({"length": 0.0}, "detail prior length: expected a positive number, found 0.0"),
-    ({"amplitude": float("nan")}, "detail prior amplitude: expected a positive number, found nan"),
+    ({"modes": -1}, r"detail\.modes: expected an integer >= 0, found -1"),
+    ({"modes": 2.5}, r"detail\.modes: expected an integer >= 0, found 2.5"),
+    ({"modes": True}, r"detail\.modes: expected an integer >= 0, found True"),
+    ({"length": 0.0}, r"detail\.length: expected a positive number, found 0.0"),
+    ({"amplitude": float("nan")}, r"detail\.amplitude: expected a positive number, found nan"),
 ])
 def test_bad_detail_prior_options_are_refused(kw, match):
     with pytest.raises(InputError, match=match):

@@ -98,10 +98,10 @@ def test_regions_are_on_by_default_and_zero_turns_them_off():
     ({"count": 2.5}, r"expression_regions: expected an integer >= 0 .*, found 2.5"),
     ({"count": True}, r"expression_regions: expected an integer >= 0 .*, found True"),
     ({"count": 1}, r"expression_regions: expected 0 \(whole expressions only\) or at least 2 regions, found 1"),
-    ({"width": 0.0}, r"region_width: expected a positive number, found 0.0"),
-    ({"sigma": float("nan")}, r"region_sigma: expected a positive number, found nan"),
-    ({"support": 1.0}, r"region_support: expected a number in \[0, 1\), found 1.0"),
-    ({"active": -0.1}, r"region_active: expected a number in \[0, 1\), found -0.1"),
+    ({"width": 0.0}, r"expression_regions\.width: expected a positive number, found 0.0"),
+    ({"sigma": float("nan")}, r"expression_regions\.sigma: expected a positive number, found nan"),
+    ({"support": 1.0}, r"expression_regions\.support: expected a number in \[0, 1\), found 1.0"),
+    ({"active": -0.1}, r"expression_regions\.active: expected a number in \[0, 1\), found -0.1"),
 ])
 def test_bad_region_options_are_refused(kw, match):
     with pytest.raises(InputError, match=match):
@@ -148,3 +148,12 @@ def test_cli_expression_regions_registers_a_folder(tmp_path, capsys):
     assert rc == 0, capsys.readouterr()
     rep = json.loads((tmp_path / "o" / "jaw.json").read_text())
     assert rep["expressions"]["coefficients"]["jawOpen"] > 0.5
+
+
+def test_more_regions_than_distinct_vertices_is_refused():
+    """Farthest-point sampling over 3 distinct vertices cannot place 12 centres (it gave NaN weights)."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    deltas = np.ones((1, 3, 3))
+    with pytest.raises(InputError, match=r"expression_regions: expected at most 3 regions .*, found 12"):
+        soft_regions(V, deltas, 12)
+    assert np.isfinite(soft_regions(V, deltas, 3)).all()

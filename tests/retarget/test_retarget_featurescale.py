@@ -130,8 +130,8 @@ def test_feature_maps_measure_each_features_proportions_and_are_bounded():
     np.testing.assert_allclose(out[:, 48:68], 2.0 * D[:, 48:68] @ R.T, atol=1e-9)
     np.testing.assert_allclose(out[:, 42:48], D[:, 42:48] @ R.T, atol=1e-9)
     np.testing.assert_allclose(out[:, :17], 1.5 * D[:, :17])                 # the jaw keeps eq. 12's s
-    # a brow moves with its eye's centre, and by its own map relative to it: its height over the eye
-    # changes by the brow's ratio, whatever the eye's lids do
+    # a brow moves with its eye's centre, and by its own map relative to it (the face's s since 859b1c2):
+    # its height over the eye does not depend on what the eye's lids do
     rel = out[:, 17:22] - out[:, 36:42].mean(1, keepdims=True)
     np.testing.assert_allclose(rel, (D[:, 17:22] - D[:, 36:42].mean(1, keepdims=True)) @ maps.maps[2], atol=1e-9)
     # an eye nearly shut on the capture's first frame (a tenth of its height: the target's lids

@@ -156,3 +156,30 @@ def test_bad_amplitude_and_bad_maps_inputs():
         feature_maps(lm, lm[:60], 1.0)
     with pytest.raises(InputError, match="scale > 0"):
         feature_maps(lm, lm, 0.0)
+
+
+def test_feature_amplitude_without_the_68_points_says_it_uses_the_single_scale(tmp_path):
+    """A capture of another landmark set cannot be split into eyes and mouth: the run says so and records
+    the mode it used."""
+    import json
+
+    import cv2
+
+    from facebasis.capture.trackfile import write_capture
+    from facebasis.defaults.cartoon import default_cartoon
+    from facebasis.retarget.pipeline import run_animate2d
+    from facebasis.retarget.synthetic import capture_from_landmarks
+
+    face = default_cartoon()
+    keep = np.arange(0, 68, 2)                                   # 34 of the 68 points
+    L0 = face.landmarks[keep]
+    t = np.arange(6)[:, None, None]
+    L = L0[None] + 2.0 * np.sin(t + L0[None, :, :1] / 50.0)      # a small smooth motion, 6 frames
+    write_capture(tmp_path / "cap", capture_from_landmarks(L, fps=25.0, size=(512, 512)))
+    cv2.imwrite(str(tmp_path / "c.png"), face.image[..., ::-1])
+    (tmp_path / "c.json").write_text(json.dumps(L0.tolist()))
+    said = []
+    run_animate2d(tmp_path / "cap", tmp_path / "out", image=tmp_path / "c.png", landmarks=tmp_path / "c.json",
+                  log=said.append)
+    assert any("'feature' needs the 68 iBUG landmarks, found 34" in s for s in said)
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["amplitude"] == "uniform"

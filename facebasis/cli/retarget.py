@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .common import add_rig_folder_args, say
+from .common import Once, add_rig_folder_args, say
 from .outputs import Outputs, capture_video
 
 _OUT = (("out", "folder", "--out"),)
@@ -52,7 +52,8 @@ def cmd_retarget(args) -> int:
     s = run_retarget(args.capture, args.out, args.rig, args.landmarks, args.exclusive, args.smooth,
                      ridge=args.ridge, neutral=args.neutral,
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
-                     preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit)
+                     preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
+                     rest_anchor=args.rest_anchor != "off")
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -154,6 +155,10 @@ def register(subparsers) -> None:
                         "without the rest face) the one that fits the pilot frames better is kept. 'quantile': the "
                         "second step alone (the default before). 'first-frame': frame 0 shows the neutral face "
                         "(wrong if the capture starts on an expression). 'rig': the rig's own neutral")
+    p.add_argument("--rest-anchor", default=None, action=Once, choices=("on", "off"),
+                   help="with --identity auto: when the first frame's posture recurs in the clip and, as the neutral, "
+                        "asks the frames for no more negative weight than the commonest posture, the rest face is "
+                        "that posture (default on); 'off': the densest cluster of pilot faces alone")
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="older spelling of --identity first-frame (still accepted)")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",

@@ -333,7 +333,7 @@ FIRST_FRAME_HINT = 0.03
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
                  identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
-                 unit: str = "cm") -> dict:
+                 unit: str = "cm", rest_anchor: bool = True) -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
@@ -342,7 +342,8 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     ``ridge`` None or "auto" (the default) sets the ridge from the capture's landmark noise
     (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
-    ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    ``rest_anchor``: with ``identity`` "auto", the first frame's posture may be the rest face
+    (:class:`.rigdrive.RigRetargeter`). ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
     (the source video beside the rig rendered with the solved weights and head rotation) and
     ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
@@ -367,7 +368,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
-    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity)
+    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity, rest_anchor=rest_anchor)
     ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
@@ -380,9 +381,11 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))
         extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
                       "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
-        steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}, quantile baseline "
+        steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}"
+                 f"{' (at the first frame)' if cal.rest_anchored else ''}, quantile baseline "
                  f"{'kept' if cal.quantile_applied else 'not kept'}" if identity == "auto" else "")
-        extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied)})
+        extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied),
+                      "identity_rest_anchor": bool(rest_anchor), "identity_rest_anchored": bool(cal.rest_anchored)})
         _log(log, f"identity: static landmark offset estimated on {len(cal.frames)} pilot frames "
                   f"({moved:.3g} rig units rms){steps}; pilot residual {cal.rms_before:.2f} px with the rig's "
                   f"neutral, {cal.rms_after:.2f} px calibrated")

@@ -277,3 +277,36 @@ def test_existing_output_survives_a_failed_run(capture, tmp_path, capsys):
     (out / "old.txt").write_text("x")
     code, _, _ = run(["retarget", str(folder), "--exclusive", "a:b", "--out", str(out)], capsys)
     assert code == 2 and (out / "old.txt").read_text() == "x"
+
+
+def test_rest_anchor_option(capture, tmp_path, capsys, monkeypatch):
+    """--rest-anchor on|off reaches the solver (default: the library's), is recorded in the summary, and
+    a bad or repeated value is one line before any work."""
+    import inspect
+
+    from facebasis.retarget import pipeline
+    from facebasis.retarget.rigdrive import RigRetargeter
+
+    folder, _ = capture
+    seen = []
+    original = RigRetargeter.__init__
+
+    def spy(self, *a, **kw):
+        seen.append(kw.get("rest_anchor"))
+        original(self, *a, **kw)
+
+    monkeypatch.setattr(RigRetargeter, "__init__", spy)
+    for extra, want in (([], True), (["--rest-anchor", "off"], False), (["--rest-anchor", "on"], True)):
+        out = tmp_path / f"rt{len(seen)}"
+        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
+        assert code == 0, stdout
+        assert seen[-1] is want
+        assert json.loads((out / "summary.json").read_text())["identity_rest_anchor"] is want
+    assert inspect.signature(pipeline.run_retarget).parameters["rest_anchor"].default is True
+    assert inspect.signature(original).parameters["rest_anchor"].default is True
+    for argv, msg in ((["--rest-anchor", "maybe"], "invalid choice: 'maybe'"),
+                      (["--rest-anchor", "on", "--rest-anchor", "off"], "--rest-anchor")):
+        with pytest.raises(SystemExit) as e:
+            _main()(["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv])
+        assert e.value.code == 2 and msg in capsys.readouterr().err
+        assert not (tmp_path / "bad").exists()

@@ -104,6 +104,16 @@ def parameter_error(name: str, expected, found, *, label: str | None = None, not
                                params={name: label or name})
 
 
+def parse_mode(name: str, value, modes: tuple, default: str) -> str:
+    """The mode ``value`` names, lower-cased and stripped (None: ``default``); anything else is a
+    :func:`parameter_error` listing ``modes``."""
+    if value is None:
+        return default
+    if not isinstance(value, str) or value.strip().lower() not in modes:
+        raise parameter_error(name, f"one of {', '.join(modes)}", repr(value))
+    return value.strip().lower()
+
+
 class MeshError(FacebasisError):
     """A mesh is unreadable, malformed or geometrically unusable (NaN, degenerate, bad indices)."""
 

@@ -171,13 +171,9 @@ def feature_maps(capture_reference, target_rest, scale: float, features=FEATURES
 
 def parse_amplitude(value) -> str:
     """Check an ``amplitude`` value (None: "feature")."""
-    from ..errors import parameter_error
+    from ..errors import parse_mode
 
-    if value is None:
-        return "feature"
-    if not isinstance(value, str) or value.strip().lower() not in AMPLITUDE_MODES:
-        raise parameter_error("amplitude", f"one of {', '.join(AMPLITUDE_MODES)}", repr(value))
-    return value.strip().lower()
+    return parse_mode("amplitude", value, AMPLITUDE_MODES, "feature")
 
 
 __all__ = ["FeatureMaps", "feature_maps", "feature_frame", "feature_height", "parse_amplitude", "FEATURES_68",

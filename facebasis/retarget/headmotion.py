@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, parameter_error
+from ..errors import InputError, parse_mode
 
 #: 68-point iBUG landmarks an expression hardly moves: nose bridge and base, eye corners
 STABLE_68 = np.r_[27:36, 36, 39, 42, 45]
@@ -138,11 +138,7 @@ HEAD_MODES = ("still", "follow")
 
 def parse_head_mode(value) -> str:
     """Check a ``--head`` value (None: "still")."""
-    if value is None:
-        return "still"
-    if not isinstance(value, str) or value.strip().lower() not in HEAD_MODES:
-        raise parameter_error("head", f"one of {', '.join(HEAD_MODES)}", repr(value))
-    return value.strip().lower()
+    return parse_mode("head", value, HEAD_MODES, "still")
 
 
 __all__ = ["HeadMotion", "fit_head_motion", "stable_landmarks", "STABLE_68", "HEAD_MODES", "parse_head_mode"]

@@ -11,6 +11,15 @@ from facebasis.geometry.rig import Rig
 from problems.ict import ict_available  # the repository root is on sys.path: pytest's `pythonpath` (pyproject.toml)
 
 
+def parser_refuses(main, argv, capsys, *needles):
+    """The command line refuses ``argv`` while parsing (argparse: exit 2), naming every one of ``needles``
+    on stderr."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and all(n in err for n in needles), err
+
+
 def grid_sheet(nx=6, ny=5, z=0.0, size=1.0):
     """A flat triangulated sheet in the plane z, (V, F)."""
     xs, ys = np.meshgrid(np.linspace(0, size, nx), np.linspace(0, size * 0.8, ny), indexing="xy")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import grid_sheet
+from conftest import grid_sheet, parser_refuses
 
 from facebasis.cli import main
 from facebasis.errors import InputError
@@ -96,13 +96,8 @@ def test_bad_detail_prior_options_are_refused(kw, match):
 
 def test_cli_detail_prior_bad_value_and_repeat(tmp_path, capsys):
     base = ["register", str(tmp_path / "scan.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(tmp_path / "o")]
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--detail-prior", "maybe"])
-    err = capsys.readouterr().err
-    assert e.value.code == 2 and "--detail-prior" in err and "invalid choice: 'maybe'" in err
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--detail-prior", "on", "--detail-prior", "off"])
-    assert e.value.code == 2 and "--detail-prior" in capsys.readouterr().err
+    parser_refuses(main, base + ["--detail-prior", "maybe"], capsys, "--detail-prior", "invalid choice: 'maybe'")
+    parser_refuses(main, base + ["--detail-prior", "on", "--detail-prior", "off"], capsys, "--detail-prior")
     assert not (tmp_path / "o").exists()
 
 

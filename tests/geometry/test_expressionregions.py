@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import parser_refuses
 
 from facebasis.cli import main
 from facebasis.errors import InputError
@@ -117,12 +118,9 @@ def test_cli_expression_regions_bad_value_and_repeat(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "error: --expression-regions: expected an integer >= 0 (0: whole expressions only), found -2" in err
     assert not (tmp_path / "o").exists()
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--expression-regions", "1", "--expression-regions", "4"])
-    assert e.value.code == 2 and "--expression-regions" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--expression-regions", "many"])
-    assert e.value.code == 2 and "--expression-regions" in capsys.readouterr().err
+    parser_refuses(main, base + ["--expression-regions", "1", "--expression-regions", "4"], capsys,
+                   "--expression-regions")
+    parser_refuses(main, base + ["--expression-regions", "many"], capsys, "--expression-regions")
 
 
 def test_cli_expression_regions_registers_a_folder(tmp_path, capsys):

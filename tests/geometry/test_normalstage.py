@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import grid_sheet
+from conftest import grid_sheet, parser_refuses
 
 from facebasis.cli import main
 from facebasis.errors import InputError
@@ -54,17 +54,9 @@ def test_a_part_without_scan_keeps_its_place():
 
 
 def test_detail_outside_the_identity_space_is_taken_along_the_normals():
-    from test_shapemodel import as_scan, face, modes
+    from test_shapemodel import as_scan, bumped_person
 
-    rig = face()
-    T, F = rig.neutral, rig.faces
-    D = modes(T)
-    c = np.array([0.8, -1.2, 0.5, 1.5, -0.3, 0.9])
-    n = NonRigidICP(F, len(T)).vertex_normals(T + np.tensordot(c, D, 1))
-    front = np.flatnonzero(T[:, 2] > np.median(T[:, 2]))
-    centre = T[front[np.argmin(((T[front, :2] - [3.0, -1.0]) ** 2).sum(1))]]
-    bump = 0.25 * np.exp(-((T - centre) ** 2).sum(1) / (2 * 1.0 ** 2))
-    person = T + np.tensordot(c, D, 1) + bump[:, None] * n
+    T, F, D, c, bump, person = bumped_person()
     S, G, R, t = as_scan(person, F, seed=1)
     basis = ShapeBasis(tuple(f"m{k}" for k in range(6)), D, "test")
     res = Registration(T, F, RegistrationOptions(after_model="normal", detail=DetailPriorOptions(modes=0)), identity=basis).register(S, G)
@@ -95,13 +87,8 @@ def test_bad_after_model_and_normal_stage_options_are_refused():
 
 def test_cli_after_model_bad_value_and_repeat(tmp_path, capsys):
     base = ["register", str(tmp_path / "scan.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(tmp_path / "o")]
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--after-model", "slide"])
-    err = capsys.readouterr().err
-    assert e.value.code == 2 and "--after-model" in err and "invalid choice: 'slide'" in err
-    with pytest.raises(SystemExit) as e:
-        main(base + ["--after-model", "normal", "--after-model", "nricp"])
-    assert e.value.code == 2 and "--after-model" in capsys.readouterr().err
+    parser_refuses(main, base + ["--after-model", "slide"], capsys, "--after-model", "invalid choice: 'slide'")
+    parser_refuses(main, base + ["--after-model", "normal", "--after-model", "nricp"], capsys, "--after-model")
 
 
 def test_the_normal_stage_is_the_default_after_a_model_fit(monkeypatch, tmp_path):

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import parser_refuses
 
 from facebasis.cli import main
 from facebasis.geometry.meshio import write_mesh
@@ -101,9 +102,8 @@ def test_cli_bad_landmark_options(tmp_path, capsys, args, message):
                                   ["--landmarks", "auto", "--landmarks", "auto"], ["--expression-transfer", "affine"],
                                   ["--expression-transfer", "linear", "--expression-transfer", "linear"]])
 def test_cli_detector_option_once_and_known(tmp_path, capsys, args):
-    with pytest.raises(SystemExit) as e:
-        main(["register", "s.obj", "--template", "t.obj", "--out", str(tmp_path / "o")] + args)
-    assert e.value.code == 2 and args[0] in capsys.readouterr().err
+    parser_refuses(main, ["register", "s.obj", "--template", "t.obj", "--out", str(tmp_path / "o")] + args, capsys,
+                   args[0])
 
 
 def test_register_files_auto_needs_a_detector_and_a_detector_needs_auto(tmp_path):

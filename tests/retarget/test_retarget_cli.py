@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import parser_refuses
 
 from facebasis.defaults.cartoon import default_cartoon
 from facebasis.defaults.face import default_template
@@ -306,7 +307,5 @@ def test_rest_anchor_option(capture, tmp_path, capsys, monkeypatch):
     assert inspect.signature(original).parameters["rest_anchor"].default is True
     for argv, msg in ((["--rest-anchor", "maybe"], "invalid choice: 'maybe'"),
                       (["--rest-anchor", "on", "--rest-anchor", "off"], "--rest-anchor")):
-        with pytest.raises(SystemExit) as e:
-            _main()(["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv])
-        assert e.value.code == 2 and msg in capsys.readouterr().err
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
         assert not (tmp_path / "bad").exists()

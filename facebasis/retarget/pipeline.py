@@ -68,12 +68,12 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
             raise InputError(f"cartoon landmark file {landmarks}: expected {cap.n_landmarks} points (the capture's "
                              f"count), found {len(pts)}")
         img, what = read_image(image), str(image)
-    if amplitude == "feature" and cap.n_landmarks != 68:  # the features are the iBUG 68 points' eyes and mouth
-        _log(log, f"amplitude: 'feature' needs the 68 iBUG landmarks, found {cap.n_landmarks}: eq. 12's single "
-                  "scale is used (amplitude uniform)")
-        amplitude = "uniform"
     t0 = time.perf_counter()
     anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head, amplitude=amplitude)
+    if anim.amplitude != amplitude:
+        _log(log, f"amplitude: 'feature' needs the 68 iBUG landmarks, found {cap.n_landmarks}: eq. 12's single "
+                  "scale is used (amplitude uniform)")
+        amplitude = anim.amplitude
     drive = anim.drive(cap.vertices, cap.landmarks)
     meshes = drive.meshes
     n_fold = int(np.count_nonzero(drive.folded_target))

@@ -225,7 +225,7 @@ class CartoonAnimator:
         paper's eq. 12 target as it is (folds where the capture's points cross)
     amplitude : "feature" (default): in :meth:`drive`, each eye and the mouth move in their own
         proportions on the target, the brows with their eyes (:mod:`.featurescale`, eq. 12 per
-        feature, 68 landmarks); "uniform":
+        feature, 68 landmarks; with another landmark set ``self.amplitude`` becomes "uniform"); "uniform":
         one eq. 13 scale for the whole face, as the paper
 
     Attributes
@@ -252,6 +252,8 @@ class CartoonAnimator:
             raise InputError(f"border: expected a number >= 0, found {border}")
         self.faces = np.asarray(faces, np.int64)
         self.capture_landmarks = lm_cap
+        if self.amplitude == "feature" and len(lm_cap) != 68:  # the features are the iBUG 68 points' eyes and mouth
+            self.amplitude = "uniform"
         self.capture_rest = np.asarray(capture_vertices, np.float64)
         self.rbf = fit_rbf(lm_cap, lm_img, c)                                  # eq. 10-11
         self.rest = self.rbf(self.capture_rest)
@@ -324,7 +326,7 @@ class CartoonAnimator:
                              f"found {lm.shape}")
         motion = fit_head_motion(lm, self.capture_landmarks)
         V = motion.remove(V)
-        if self.amplitude == "feature" and len(self.capture_landmarks) == 68:   # eq. 12 per feature
+        if self.amplitude == "feature":                       # eq. 12 per feature
             from .featurescale import feature_maps
 
             maps = feature_maps(self.capture_landmarks, self.rest[:68], self.scale)

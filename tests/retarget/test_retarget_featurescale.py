@@ -183,3 +183,19 @@ def test_feature_amplitude_without_the_68_points_says_it_uses_the_single_scale(t
                   log=said.append)
     assert any("'feature' needs the 68 iBUG landmarks, found 34" in s for s in said)
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["amplitude"] == "uniform"
+
+
+def test_the_animator_records_the_amplitude_it_uses():
+    """Called from Python with a capture of another landmark set, the animator itself says that it uses
+    the single scale."""
+    from facebasis.defaults.cartoon import default_cartoon
+    from facebasis.retarget.synthetic import capture_from_landmarks
+    from facebasis.retarget.warp2d import CartoonAnimator
+
+    face = default_cartoon()
+    L0 = face.landmarks[np.arange(0, 68, 2)]
+    cap = capture_from_landmarks(L0[None], fps=25.0, size=(512, 512))
+    anim = CartoonAnimator(face.image, L0, cap.landmarks[0], cap.vertices[0], cap.faces, amplitude="feature")
+    assert anim.amplitude == "uniform"
+    assert CartoonAnimator(face.image, face.landmarks, face.landmarks, face.landmarks,
+                           capture_from_landmarks(face.landmarks[None]).faces).amplitude == "feature"

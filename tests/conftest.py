@@ -66,6 +66,25 @@ def write_rig_inputs(root, pp, n_iterations=None):
     return root
 
 
+def write_mp4(path, frames, crf=None):
+    """Frames (n, H, W, 3) uint8 as an H.264 mp4 with its index up front (``faststart``), so that a file cut
+    short still decodes its first frames (PyAV, independent of the package's own writers)."""
+    import av
+
+    frames = np.asarray(frames)
+    with av.open(str(path), "w", options={"movflags": "faststart"}) as c:
+        s = c.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = frames.shape[2], frames.shape[1], "yuv420p"
+        if crf is not None:
+            s.options = {"crf": str(crf)}
+        for f in frames:
+            for pk in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
+                c.mux(pk)
+        for pk in s.encode():
+            c.mux(pk)
+    return Path(path)
+
+
 def _png_bytes(w=4, h=4):
     """A tiny RGB PNG (a texture for the FaceXModel-like folder)."""
     import io

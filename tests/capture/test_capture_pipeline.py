@@ -14,6 +14,8 @@ from facebasis.capture.overlay import OverlayWriter
 from facebasis.capture.pipeline import FrameReader, OverlayThread
 from facebasis.errors import InputError
 
+from conftest import write_mp4
+
 VIDEO_DIR = Path(__file__).resolve().parents[2].parent / "shared/data/video"
 
 
@@ -192,20 +194,10 @@ def test_mediapipe_threaded_capture_is_the_serial_one(tmp_path):
 def test_a_cut_video_warns_once_in_the_calling_thread(tmp_path, threads):
     import warnings
 
-    import av
-
     from facebasis.capture.video import VideoWarning
 
     seq = synthetic_sequence(24, size=(128, 128))
-    full = tmp_path / "full.mp4"
-    with av.open(str(full), "w", options={"movflags": "faststart"}) as c:
-        s = c.add_stream("libx264", rate=25)
-        s.width, s.height, s.pix_fmt = 128, 128, "yuv420p"
-        for f in seq.frames:
-            for pk in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
-                c.mux(pk)
-        for pk in s.encode():
-            c.mux(pk)
+    full = write_mp4(tmp_path / "full.mp4", seq.frames)
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size * 2 // 3])
     with warnings.catch_warnings(record=True) as caught:

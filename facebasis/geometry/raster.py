@@ -13,10 +13,15 @@ SKIN_RGB = (0.85, 0.78, 0.72)
 LIGHT = np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0])
 
 
+def shade(normals) -> np.ndarray:
+    """Flat shading ``0.25 + 0.75 |n . LIGHT|`` (m,) of unit triangle normals (m, 3): both sides lit alike."""
+    return 0.25 + 0.75 * np.abs(normals @ LIGHT)
+
+
 def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=None) -> np.ndarray:
     """Flat-shaded image of a mesh already in pixel coordinates, for video frames (no OpenGL).
 
-    The same shading as :func:`facebasis.report.render.draw_mesh` (``0.25 + 0.75 |n . light|``), but
+    The same shading as :func:`facebasis.report.render.draw_mesh` (:func:`shade`), but
     rasterised with numpy instead of a matplotlib PolyCollection (slow and memory-hungry for
     tens of thousands of triangles): front-facing triangles are cut into pixel rows (one span per triangle and
     row whose pixel centres it covers, between the long edge of the y-sorted triangle and its
@@ -56,7 +61,7 @@ def rasterize_mesh(P, F, size, color=SKIN_RGB, background=(255, 255, 255), out=N
     n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
     col = np.asarray(color, float)
     col = col[keep] if col.ndim == 2 else col
-    rgb = np.clip((0.25 + 0.75 * np.abs(n @ LIGHT))[:, None] * col * 255.0, 0, 255).astype(np.uint8)
+    rgb = np.clip(shade(n)[:, None] * col * 255.0, 0, 255).astype(np.uint8)
     # z-buffer key: the triangle's mean depth quantised to 2^20 levels in the high bits, its index in
     # the low ones (no sort: the largest key at a pixel is the nearest triangle)
     z = tri[:, 0, 2] + tri[:, 1, 2] + tri[:, 2, 2]

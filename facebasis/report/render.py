@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+# the rasteriser and its shading live in geometry: retarget's preview videos may not import report
+from ..geometry.raster import SKIN_RGB, rasterize_mesh, shade
+
 VIEWS = {"front": (0.0, 0.0), "left": (0.0, 60.0), "right": (0.0, -60.0), "below": (-35.0, 0.0)}
 
 
@@ -28,7 +31,7 @@ HIGHLIGHT2_RGB = np.array([1.0, 0.6, 0.0])    # orange
 
 
 def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vmax=None,
-              face_mask=None, highlight=None, crop=None, color=(0.85, 0.78, 0.72), highlight2=None,
+              face_mask=None, highlight=None, crop=None, color=SKIN_RGB, highlight2=None,
               rasterized=True):
     """Draw a shaded mesh into a matplotlib axis (camera looks along -z after the view rotation).
 
@@ -62,9 +65,6 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     tri = P[F]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
-    light = np.array([0.3, 0.4, 1.0])
-    light /= np.linalg.norm(light)
-    shade = 0.25 + 0.75 * np.abs(n @ light)
     depth = tri[:, :, 2].mean(1)
     if crop is not None:
         (x0, x1), (y0, y1) = crop
@@ -80,7 +80,7 @@ def draw_mesh(ax, V, F, values=None, view="front", cmap="viridis", vmin=None, vm
     else:
         mapper = None
         rgb = np.tile(np.asarray(color, float), (len(F), 1))
-    rgb = rgb * shade[:, None]
+    rgb = rgb * shade(n)[:, None]
     if highlight2 is not None:
         rgb[np.asarray(highlight2, bool)] = HIGHLIGHT2_RGB
     if highlight is not None:
@@ -154,7 +154,3 @@ def render_image(V, F, crop, width: int, values=None, vmin=0.0, vmax=1.0, cmap=N
         img = img.reshape(H // ss, ss, W // ss, ss, 3).mean((1, 3)).round().astype(np.uint8)
     return img
 
-
-# the video-frame rasteriser lives in geometry (retarget's previews may not import report); the
-# report renderer re-exports it beside its matplotlib drawing
-from ..geometry.raster import LIGHT, SKIN_RGB, rasterize_mesh  # noqa: E402,F401

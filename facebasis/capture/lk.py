@@ -223,3 +223,73 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     I = I - (w * I).sum(1, keepdims=True)
     zn = (w * I * T).sum(1) / np.sqrt((w * I * I).sum(1) * (w * T * T).sum(1) + 1e-12)
     return p, zn, A
+
+
+def drift_image(gray: np.ndarray, points: np.ndarray, sigma: float, margin: float):
+    """Blurred image and gradients (:func:`facebasis.capture.meshtrack.prepare_image`) of the box around
+    ``points (L, 2)`` widened by ``margin`` pixels (the part the drift correction samples), and the
+    box's top-left corner ``(2,)``: points in it are ``points - corner``."""
+    from .meshtrack import prepare_image
+
+    h, w = gray.shape
+    pts = np.asarray(points, float)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if not len(pts):
+        return prepare_image(gray, sigma), np.zeros(2)
+    x0, y0 = np.clip(np.floor(pts.min(0) - margin).astype(int), 0, [w - 1, h - 1])
+    x1, y1 = np.clip(np.ceil(pts.max(0) + margin).astype(int) + 1, [x0 + 1, y0 + 1], [w, h])
+    return prepare_image(np.ascontiguousarray(gray[y0:y1, x0:x1]), sigma), np.array([x0, y0], float)
+
+
+class DriftTemplates:
+    """First-frame patches of the drift correction, sampled on a ``samples x samples`` grid over each
+    point's LK window, and on a denser ``dense_samples`` grid for the points in ``dense``.
+
+    The patches are taken from, and aligned on, the image blurred by ``sigma`` (``drift_blur`` of
+    :class:`facebasis.capture.options.TrackerOptions` times the face scale) in a box around the
+    points (:func:`drift_image`). A thin feature, such as a closed mouth's lip line on which the
+    inner-lip points sit, can fall between the rows of a 7 x 7 grid over a 15 px window (2.3 px
+    apart) at that small blur, and the alignment then slides along it (a drawn 1 px lip line: the
+    inner-lip points 2.1 px off on average over 11 frames); a 15 x 15 grid (1 px apart) sees it
+    (0.75 px). Only those few points pay for the denser grid.
+
+    Parameters
+    ----------
+    gray : ndarray, shape (H, W) float32
+        Frame 0 (grey levels).
+    points : ndarray, shape (L, 2)
+    windows : ndarray, shape (L, 2)
+        LK windows (the patch extents).
+    dense : ndarray, shape (P,) int
+        Points sampled on the dense grid.
+    sigma : float
+        Blur in pixels.
+    margin : float
+        Width of the box around the points (pixels): the largest window plus the largest motion.
+    samples, dense_samples : int
+    """
+
+    def __init__(self, gray: np.ndarray, points: np.ndarray, windows: np.ndarray, dense: np.ndarray,
+                 sigma: float, margin: float, samples: int = 7, dense_samples: int = 15):
+        from .particle import sample
+
+        self.sigma, self.margin = float(sigma), float(margin)
+        (image, _, _), o = drift_image(gray, points, self.sigma, self.margin)
+        is_dense = np.zeros(len(points), bool)
+        is_dense[np.asarray(dense, np.int64)] = True
+        self.groups = []
+        for idx, n in ((np.flatnonzero(~is_dense), samples), (np.flatnonzero(is_dense), dense_samples)):
+            if len(idx):
+                off = patch_grid(windows[idx], n)
+                self.groups.append((idx, off, sample(image, points[idx, None, :] - o + off)))
+
+    def align(self, gray: np.ndarray, guess: np.ndarray, A: np.ndarray, around: np.ndarray,
+              **kw) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`template_align` of every group on ``gray (H, W)`` from ``guess (L, 2)`` and ``A (L, 2, 2)``;
+        the image is blurred in the box around ``guess`` and ``around (K, 2)`` (the previous points).
+        Returns points ``(L, 2)`` and their ZNCC ``(L,)``."""
+        prep, o = drift_image(gray, np.concatenate([guess, around]), self.sigma, self.margin)
+        p, zn = np.array(guess, float) - o, np.zeros(len(guess))
+        for idx, off, tmpl in self.groups:
+            p[idx], zn[idx], _ = template_align(tmpl, off, prep, p[idx], A[idx], **kw)
+        return p + o, zn

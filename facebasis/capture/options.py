@@ -60,6 +60,14 @@ class TrackerOptions:
         Largest accepted correction, pixels at reference face size.
     drift_zncc : float
         Smallest accepted zero-mean NCC of the aligned patch with the first frame's.
+    drift_blur : float
+        Gaussian blur (pixels at reference face size, times the clipped face scale) of the image the
+        drift correction aligns on (the mesh stage keeps ``mesh.blur``). 0.5: aligned on the mesh's
+        image (1.5, before), the blurred first-frame patches lost the fine texture that pins them
+        along an edge, and the points slid along the lip line and the eyelids as the mouth opened
+        and the eyes blinked, by up to 4 px on a 345 px wide face (Grace Hopper upscaled 2x:
+        landmarks 0.40 -> 0.20 px mean, max 3.9 -> 1.2; every warped face of
+        reports/capture/gt_benchmark.md gains). Must be >= 0.
     drift_recovery : float
         For a point lost in the previous frame, ``drift_max_shift`` is multiplied by this and the
         NCC threshold raised halfway to 1, so the first frame's appearance can pull it back.
@@ -82,6 +90,7 @@ class TrackerOptions:
     drift_affine: bool = True
     drift_max_shift: float = 1.0
     drift_zncc: float = 0.9
+    drift_blur: float = 0.5
     drift_recovery: float = 4.0
     outlier_distance: float = 0.15
     filter: FilterOptions = field(default_factory=FilterOptions)

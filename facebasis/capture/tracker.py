@@ -38,10 +38,10 @@ from .lips import (
     follow_outer_lip,
     similarity_factor,
 )
-from .lk import build_pyramid, lk_track, local_affine, local_affine_factor, patch_grid, template_align
+from .lk import DriftTemplates, build_pyramid, lk_track, local_affine, local_affine_factor
 from .meshtrack import MeshRefiner, prepare_image
 from .options import TrackerOptions
-from .particle import CondensationFilter, neighbour_weights, sample
+from .particle import CondensationFilter, neighbour_weights
 from .trackfile import OVERLAY_FILE, Capture, write_capture
 from .video import VideoWarning
 from .video import gray_pair as _grays
@@ -49,10 +49,11 @@ from .video import gray_pair as _grays
 __all__ = ["CaptureResult", "FaceTracker", "FrameResult", "TrackerOptions", "capture", "check_capture_args"]
 
 
-#: Drift correction: samples per side of each landmark's template grid (over its LK window),
+#: Drift correction: samples per side of each landmark's template grid (over its LK window; the
+#: inner-lip points, on the thin lip line, DRIFT_SAMPLES_DENSE, see :class:`DriftTemplates`),
 #: Gauss-Newton iterations per frame, damping of the affine part (measured on the ground-truth
 #: benchmark: 7 x 7 samples and 4 iterations are as precise as 11 x 11 and 8, at a third of the cost).
-DRIFT_SAMPLES, DRIFT_ITERATIONS, DRIFT_DAMPING = 7, 4, 0.05
+DRIFT_SAMPLES, DRIFT_SAMPLES_DENSE, DRIFT_ITERATIONS, DRIFT_DAMPING = 7, 15, 4, 0.05
 _NOT_RUN = object()   # no detection was run on the first frame yet
 
 
@@ -96,6 +97,8 @@ class FaceTracker:
         self.opt = options
         if options.inner_lips not in INNER_LIPS:
             raise InputError(f"inner_lips: expected one of {', '.join(INNER_LIPS)}, found {options.inner_lips!r}")
+        if not (np.isfinite(options.drift_blur) and options.drift_blur >= 0):
+            raise InputError(f"drift_blur: expected a number >= 0, found {options.drift_blur!r}")
         if not (np.isfinite(options.outlier_distance) and options.outlier_distance >= 0):
             raise InputError(f"outlier_distance: expected a number >= 0 (face widths; 0 = off), "
                              f"found {options.outlier_distance!r}")
@@ -124,8 +127,8 @@ class FaceTracker:
         self._lost_prev = np.zeros(L, bool)
         self._lm0, self._width = lm.copy(), face_width(lm)
         self._W = neighbour_weights(lm, options.filter.neighbour_sigma * face_width(lm))   # LK-failure prediction
-        self._offsets = patch_grid(self.windows, DRIFT_SAMPLES)
-        self._template = sample(self._prep[0], lm[:, None, :] + self._offsets)
+        self._drift = DriftTemplates(gray, lm, self.windows, self._inner, options.drift_blur * self.scale,
+                                     self.windows.max() + 8.0 * self.scale, DRIFT_SAMPLES, DRIFT_SAMPLES_DENSE)
         self._V = self.mesh.vertices.copy()
         self._affine = local_affine_factor(self.mesh.vertices, np.arange(L), self.mesh.spacing)   # frame 0's part
         self.first = FrameResult(lm.copy(), self.mesh.vertices.copy(), np.zeros(L, bool))
@@ -205,12 +208,11 @@ class FaceTracker:
             self.filter.place(np.flatnonzero(bad), lm[bad])
         return lm, lost | bad
 
-    def _correct_drift(self, lk, prep):
+    def _correct_drift(self, lk, gray):
         """Align the first frame's patches from the LK positions (``drift_correction``); sets ``_drift_ok``."""
         A = local_affine(self.mesh.vertices, self._V, np.arange(self.L), self.mesh.spacing, self._affine)
-        p, zn, _ = template_align(self._template, self._offsets, prep, lk.points, A,
-                                 iterations=DRIFT_ITERATIONS, affine=self.opt.drift_affine,
-                                 affine_damping=DRIFT_DAMPING)
+        p, zn = self._drift.align(gray, lk.points, A, self._lm, iterations=DRIFT_ITERATIONS,
+                                  affine=self.opt.drift_affine, affine_damping=DRIFT_DAMPING)
         # a point lost in the previous frame or failed by LK in this one (started from its neighbours'
         # motion) may be pulled back further, on a stricter match
         far = self._lost_prev | ~lk.ok
@@ -252,7 +254,7 @@ class FaceTracker:
         prep = prepare_image(gray, self.opt.mesh.blur * self.scale)
         self._drift_ok = np.zeros(self.L, bool)
         if self.opt.drift_correction:
-            lk = self._correct_drift(lk, prep)
+            lk = self._correct_drift(lk, gray)
         if self.filter is not None:
             ok = lk.ok | self._drift_ok
             ok[self._inner] = self._lip_seen()   # placed by the lip model: no LK evidence for their neighbours

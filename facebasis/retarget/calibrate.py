@@ -339,7 +339,7 @@ def _fitted_rms(solver: FrameSolver, landmarks, visible, frames) -> float:
 
 def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST_FRAMES,
                    rounds: int = CALIBRATION_ROUNDS, share: float = REST_SHARE,
-                   anchor: bool = False, window=None) -> IdentityCalibration:
+                   anchor: bool = False, window=None, rms_before: float | None = None) -> IdentityCalibration:
     """The person's rest face: the densest cluster of the capture's pose-normalised faces.
 
     A face at rest is where a capture spends most of its time, and comes back to between
@@ -356,7 +356,8 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     frame and the rig's neutral stays (the weights are then exactly those of ``identity="rig"``).
     ``anchor``: the first frame's posture when it recurs (:func:`rest_frames`); ``window`` (frame
     indices of the take's start, at rest by :func:`.reststart.rest_start`): their median posture,
-    the window's frames joining the pilot frames.
+    the window's frames joining the pilot frames. ``rms_before``: the rig neutral's residual of an
+    earlier call on the same capture and solver (the same check frames: not fitted again).
 
     Returns
     -------
@@ -375,7 +376,7 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     if window is not None:                  # the take's start window joins the pilot frames
         frames = np.union1d(frames, np.asarray(window, np.int64))
         win = np.searchsorted(frames, np.asarray(window, np.int64))
-    before = _fitted_rms(solver, P, vis, check)
+    before = _fitted_rms(solver, P, vis, check) if rms_before is None else rms_before
     poses, moved = None, solver
     for _ in range(rounds):
         O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
@@ -428,7 +429,7 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True,
     if not anchor or verdict is False:
         return common
     window = None if start is None else start.frames
-    first = calibrate_rest(solver, landmarks, visible, anchor=True, window=window)
+    first = calibrate_rest(solver, landmarks, visible, anchor=True, window=window, rms_before=rest.rms_before)
     if not (first.applied and first.rest_anchored):
         return common
     ratio = demand_ratio(solver, first.neutral, common.neutral, landmarks, visible,

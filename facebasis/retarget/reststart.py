@@ -8,11 +8,12 @@ the first frame's neutral at most 1.25 times the commonest posture's, :mod:`.one
 flips with capture noise (two dlib captures of the same clip: 1.13 and above 1.25). This module
 decides it from what a person would look at, on the 68-point iBUG layout:
 
-* **still**: over the first :data:`START_WINDOW` seconds, every frame's landmarks, after a
-  similarity alignment onto the window's median face (scale, rotation, translation: head motion is
-  not expression), lie within :data:`STILL_TOL` times the face width (rms over the landmarks) of
-  that median face: the tolerance of the owner's calm frames, held for half a second (a posture
-  held, not a frame passed through mid-sentence);
+* **still**: over the first :data:`START_MIN` seconds, every frame's landmarks, after a
+  similarity alignment onto their median face (scale, rotation, translation: head motion is not
+  expression), lie within :data:`STILL_TOL` times the face width (rms over the landmarks) of that
+  median face: the tolerance of the owner's calm frames, held for 0.3 s (a posture held, not a
+  frame passed through mid-sentence: speech moves the lips at 3-5 Hz). The window is those frames
+  and the following ones up to :data:`START_WINDOW` seconds while they stay within the tolerance;
 * **lips closed**: the window's median inner-lip gap (mean of the 61-67, 62-66, 63-65 distances,
   over the distance between the eye centres) is at most :data:`LIP_MARGIN` above the capture's
   :data:`LIP_QUANTILE` quantile of the same gap. Relative to the capture because detectors place
@@ -21,7 +22,7 @@ decides it from what a person would look at, on the 68-point iBUG layout:
   where the speech posture of the shared clips is 0.08 (0.5 cm) and an open mouth 0.25-0.35; and
   never above :data:`LIP_MAX`.
 
-Both hold: the take starts at rest, and the window's frames (a median over half a second, not one
+Both hold: the take starts at rest, and the window's frames (a median over 0.3-0.5 s, not one
 frame) give the anchored rest face. Either fails: the take starts on an expression or mid-sentence,
 and no anchoring happens, whatever the weights say. Other landmark layouts give no evidence
 (``None``) and keep the weight-based test. Pure functions of numpy arrays, vectorised over frames.
@@ -35,7 +36,10 @@ import numpy as np
 
 #: seconds at the start of a take whose posture is tested (and, at rest, forms the anchored rest face)
 START_WINDOW = 0.5
-#: a still window: every frame within this fraction of the face width (rms) of the window's median face
+#: the first this many seconds must hold the posture (a start at rest held shorter than the window
+#: still counts: the window then ends where the face leaves it)
+START_MIN = 0.3
+#: a still start: every frame within this fraction of the face width (rms) of the start's median face
 STILL_TOL = 0.015
 #: closed lips: window gap at most this far (fraction of the eye distance) above the capture's low quantile
 LIP_MARGIN = 0.03
@@ -55,10 +59,10 @@ class RestStart:
 
     Attributes
     ----------
-    frames : (n,) int64 the window's frame indices (the first ``START_WINDOW`` seconds, frames with
-        at most a tenth of the landmarks lost; frame 0 first)
-    deviation : largest rms distance of a window frame from the window's median face, aligned, in
-        face widths
+    frames : (n,) int64 the window's frame indices (frames with at most a tenth of the landmarks
+        lost, in the first :data:`START_MIN` to :data:`START_WINDOW` seconds; frame 0 first)
+    deviation : largest rms distance of a frame of the first :data:`START_MIN` seconds from their
+        median face, aligned, in face widths
     gap : the window's median inner-lip gap over the eye distance
     closed_gap : the capture's closed-lip gap (its :data:`LIP_QUANTILE` quantile)
     still, closed : the two tests
@@ -103,29 +107,34 @@ def inner_lip_gap(P) -> np.ndarray:
 def rest_start(landmarks, visible, fps: float, window: float = START_WINDOW) -> RestStart | None:
     """Whether a take starts at rest (module docstring), from landmarks (T, 68, 2) px and visible
     (T, 68) bool at ``fps`` frames per second; None when the landmarks are not the 68-point iBUG
-    layout, frame 0 has more than a tenth of them lost or fewer than 3 of the window's frames count."""
+    layout, frame 0 has more than a tenth of them lost or fewer than 3 frames of the first
+    :data:`START_MIN` seconds count."""
     P = np.asarray(landmarks, np.float64)
     vis = np.asarray(visible, bool)
     if P.ndim != 3 or P.shape[1:] != (68, 2):
         return None
     n = max(3, int(round(window * float(fps))))
+    n_core = min(n, max(3, int(round(START_MIN * float(fps)))))
     # a landmark the tracker marked lost still has the filter's estimate: a frame counts unless more
     # than a tenth of its landmarks are lost (or any is missing)
     full = (vis.mean(1) >= 0.9) & np.isfinite(P).all((1, 2))
     frames = np.flatnonzero(full[:n])
-    if len(frames) < 3 or frames[0] != 0:
+    core = frames < n_core
+    if core.sum() < 3 or frames[0] != 0:
         return None
-    W = P[frames]
-    ref = np.median(W, axis=0)
-    A = align_similarity(W, ref)
-    ref = np.median(A, axis=0)                       # the median face in its own (aligned) frame
+    ref = np.median(align_similarity(P[frames[core]], np.median(P[frames[core]], axis=0)), axis=0)
+    A = align_similarity(P[frames], ref)             # onto the core's median face, in its own frame
     width = float(np.linalg.norm(ref[0] - ref[16]))
-    dev = float(np.sqrt(((A - ref[None]) ** 2).sum(2).mean(1)).max() / max(width, 1e-12))
+    d = np.sqrt(((A - ref[None]) ** 2).sum(2).mean(1)) / max(width, 1e-12)
+    dev = float(d[core].max())
+    leave = np.flatnonzero(~core & (d > STILL_TOL))   # the window ends where the face leaves the posture
+    frames = frames[:leave[0]] if len(leave) else frames
+    W = P[frames]
     gaps = inner_lip_gap(P[full])
     gap = float(np.median(inner_lip_gap(W)))
     closed_gap = float(np.quantile(gaps, LIP_QUANTILE))
     return RestStart(frames.astype(np.int64), dev, gap, closed_gap, dev <= STILL_TOL, gap <= min(closed_gap + LIP_MARGIN, LIP_MAX))
 
 
-__all__ = ["RestStart", "rest_start", "inner_lip_gap", "align_similarity", "START_WINDOW", "STILL_TOL",
+__all__ = ["RestStart", "rest_start", "inner_lip_gap", "align_similarity", "START_WINDOW", "START_MIN", "STILL_TOL",
            "LIP_MARGIN", "LIP_QUANTILE", "LIP_MAX", "INNER_LIP_PAIRS"]

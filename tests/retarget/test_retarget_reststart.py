@@ -61,6 +61,16 @@ def test_the_start_evidence_does_not_flip_with_landmark_noise(rig_idx, seed):
     assert list(verdicts["rest"].frames) == list(range(15))                   # half a second at 30 fps
 
 
+def test_a_short_rest_start_counts_and_its_window_ends_where_the_face_leaves_it(rig_idx):
+    rig, idx = rig_idx
+    X, _ = talking(rig, "rest")
+    X[12:30, rig.names.index("jawOpen")] = 0.6                 # at rest for 0.4 s, then the mouth opens at once
+    ev = rest_start(capture(rig, idx, X).landmarks, np.ones((T, len(idx)), bool), FPS)
+    assert ev.at_rest and list(ev.frames) == list(range(12))
+    X[6:30, rig.names.index("jawOpen")] = 0.6                  # 0.2 s: shorter than START_MIN, not a held posture
+    assert not rest_start(capture(rig, idx, X).landmarks, np.ones((T, len(idx)), bool), FPS).still
+
+
 def test_no_evidence_on_other_layouts_or_a_lost_first_frame(rig_idx):
     rig, idx = rig_idx
     cap = capture(rig, idx, talking(rig, "rest")[0])

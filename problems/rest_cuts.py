@@ -174,7 +174,7 @@ def cut_table(rows) -> str:
         b = by.get((clip, mode, st, "before"))
         bt = f"{b['anchored']:d}, {b['calm_max_median']:.3f}, {b['lr_diff_median']:.3f}" if b else ""
         lines.append(f"| {clip} | {mode} | {st:g} | {r['start']} | {r['start_deviation']:.4f} | "
-                     f"{r['start_gap']:.3f} / {r['closed_gap']:.3f} | {r['calm_frames']} | {bt} | {r['anchored']:d}, "
+                     f"{r['start_gap']:.3f} / {r['closed_gap']:.3f} | {int(r['calm_frames'])} | {bt} | {r['anchored']:d}, "
                      f"{r['demand_ratio']:.2f}, {r['calm_max_median']:.3f} ({r['calm_argmax']}), "
                      f"{r['calm_jawOpen_median']:.3f}, {r['lr_diff_median']:.3f} |")
     return "\n".join(lines) + "\n"

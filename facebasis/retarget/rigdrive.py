@@ -245,9 +245,11 @@ class RigRetargeter:
         1 measures it as every other landmark), see :func:`.pose.contour_weights`
     sparsity : the exponential part of the weight prior, ``sparsity * rho * sum_i x_i``
         (:data:`DEFAULT_SPARSITY`; 0 leaves the Gaussian ridge alone)
-    rest_anchor : ``identity="auto"``: take the first frame's posture as the rest face when it recurs
-        and is one-sided enough (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps
-        the capture's commonest posture (the default before it)
+    rest_anchor : ``identity="auto"``: take the start's posture as the rest face when the take starts
+        at rest (a 68-point capture: still for 0.3 s with closed lips, :func:`.reststart.rest_start`;
+        other layouts: the first frame's posture recurs) and it is one-sided enough
+        (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps the capture's commonest
+        posture (the default before it)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,

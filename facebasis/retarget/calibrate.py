@@ -50,7 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .framefit import FrameSolver
-from .onesided import negative_demand
+from .onesided import demand_ratio
 from .pose import PI, fit_pose_affine, fit_pose_gn
 
 #: pilot frames (evenly spaced) of the calibration
@@ -93,9 +93,12 @@ class IdentityCalibration:
         the landmark noise of the "auto" ridge, :meth:`.rigdrive.RigRetargeter.estimate_noise`)
     applied : False when the offset lowered the pilot residual by less than :data:`MIN_GAIN` (then
         nothing is applied: offset and baseline are 0 and rms_after, noise those of the rig's neutral)
-    rest_applied, quantile_applied : ``identity="auto"``: which of its two steps was kept (the rest
-        face, :func:`calibrate_rest`; the quantile baseline on top of it, :func:`calibrate_identity`)
+    rest_applied, quantile_applied : ``identity="auto"``: the rest face (:func:`calibrate_rest`) /
+        the quantile baseline on top of it (:func:`calibrate_identity`) was kept
     rest_anchored : the rest face is the posture of the capture's first frame (:func:`rest_frames`)
+    rest_start : the landmark evidence that the take starts at rest (:mod:`.reststart`; None: none)
+    demand_ratio : negative-weight demand of the anchored rest face over the commonest posture's
+        (:func:`.onesided.demand_ratio`; nan when the anchor was not tried)
     neutral : (L, 3) the calibrated neutral landmarks: the solver's ``v0`` plus ``offset``, as the
         rounds added it up (kept beside ``offset`` so that a solver built on it is bit for bit the
         one the calibration measured; ``v0 + offset`` may differ in the last bit). None only when
@@ -113,6 +116,8 @@ class IdentityCalibration:
     quantile_applied: bool = False
     neutral: np.ndarray | None = None
     rest_anchored: bool = False
+    rest_start: bool | None = None
+    demand_ratio: float = float("nan")
 
 
 def pilot_frames(visible, n: int = CALIBRATION_FRAMES) -> np.ndarray:
@@ -244,6 +249,9 @@ ANCHOR_DEMAND_RATIO = 1.25
 #: the first frame's posture is taken as the rest face (the median of the pilot faces around it) when
 #: at least this fraction of the densest cluster's size lies within that cluster's radius of it
 REST_ANCHOR_MIN = 0.2
+#: with the landmark evidence of a start at rest (:mod:`.reststart`), the anchored rest face is still
+#: refused above this demand ratio (a held expression, not rest); measured in reports/retarget/rest_cuts.md
+ANCHOR_DEMAND_MAX = 2.0
 
 
 def rest_offsets(solver, landmarks, visible, frames, poses=None):
@@ -287,7 +295,7 @@ def densest_frames(offsets, share: float = REST_SHARE) -> np.ndarray:
 
 
 def rest_frames(offsets, share: float = REST_SHARE, anchor: int | None = None,
-                min_share: float = REST_ANCHOR_MIN) -> tuple[np.ndarray, bool]:
+                min_share: float = REST_ANCHOR_MIN, window=None) -> tuple[np.ndarray, bool]:
     """The frames whose median is the rest face, and whether they are the anchor's.
 
     Without ``anchor``: :func:`densest_frames`. With ``anchor`` (a frame index: the capture's first
@@ -299,8 +307,19 @@ def rest_frames(offsets, share: float = REST_SHARE, anchor: int | None = None,
     parted): when the first frame's posture recurs, it is the rest face; when it does not (a take
     that starts on an expression), the commonest posture is.
 
+    With ``window`` (indices of the offsets of the take's first half second, at rest by the landmark
+    evidence of :mod:`.reststart`): the anchor's posture is the median of the window's faces (not one
+    frame) and the window's frames with those within the densest cluster's radius of that posture
+    are the rest frames, anchored whether or not the posture recurs (the window itself holds it).
+
     Returns (indices, anchored)."""
     dense = densest_frames(offsets, share)
+    if window is not None:
+        d = _distances(offsets)
+        Z = np.nan_to_num(offsets[:, :, :2].reshape(len(offsets), -1))
+        posture = np.median(Z[np.asarray(window)], axis=0)
+        near = np.sqrt(((Z - posture[None]) ** 2).mean(1)) <= d[dense[0], dense[-1]]
+        return np.union1d(np.asarray(window), np.flatnonzero(near)), True
     if anchor is None:
         return dense, False
     d = _distances(offsets)
@@ -320,7 +339,7 @@ def _fitted_rms(solver: FrameSolver, landmarks, visible, frames) -> float:
 
 def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST_FRAMES,
                    rounds: int = CALIBRATION_ROUNDS, share: float = REST_SHARE,
-                   anchor: bool = False) -> IdentityCalibration:
+                   anchor: bool = False, window=None, rms_before: float | None = None) -> IdentityCalibration:
     """The person's rest face: the densest cluster of the capture's pose-normalised faces.
 
     A face at rest is where a capture spends most of its time, and comes back to between
@@ -335,6 +354,10 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     It is kept only if it lowers the median residual of the full pilot fits (pose and weights) by
     :data:`REST_MIN_GAIN` or more: on a capture of the rig's own face the shapes already fit every
     frame and the rig's neutral stays (the weights are then exactly those of ``identity="rig"``).
+    ``anchor``: the first frame's posture when it recurs (:func:`rest_frames`); ``window`` (frame
+    indices of the take's start, at rest by :func:`.reststart.rest_start`): their median posture,
+    the window's frames joining the pilot frames. ``rms_before``: the rig neutral's residual of an
+    earlier call on the same capture and solver (the same check frames: not fitted again).
 
     Returns
     -------
@@ -349,12 +372,15 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     if len(frames) == 0:
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, float("nan"), float("nan"), neutral=v_start)
     check = frames[np.unique(np.linspace(0, len(frames) - 1, min(len(frames), CALIBRATION_FRAMES)).round().astype(int))]
-    before = _fitted_rms(solver, P, vis, check)
-    poses = None
-    moved = solver
+    win = None
+    if window is not None:                  # the take's start window joins the pilot frames
+        frames = np.union1d(frames, np.asarray(window, np.int64))
+        win = np.searchsorted(frames, np.asarray(window, np.int64))
+    before = _fitted_rms(solver, P, vis, check) if rms_before is None else rms_before
+    poses, moved = None, solver
     for _ in range(rounds):
         O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
-        near, anchored = rest_frames(O, share, 0 if anchor else None)
+        near, anchored = rest_frames(O, share, 0 if anchor else None, window=win)
         off = np.nan_to_num(np.nanmedian(O[near], axis=0))
         off[:, 2] = 0.0
         moved = moved.shifted(off)
@@ -366,16 +392,7 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
                                neutral=moved.v0, rest_anchored=anchored)
 
 
-def _one_sided(solver: FrameSolver, first, common, landmarks, visible) -> bool:
-    """True if the neutral ``first`` (L, 3) demands no more negative weight (:mod:`.onesided`, median
-    over the pilot frames) than :data:`ANCHOR_DEMAND_RATIO` times the neutral ``common``."""
-    frames = pilot_frames(visible, CALIBRATION_FRAMES)
-    a = np.nanmedian(negative_demand(solver.with_neutral(first), landmarks, visible, frames))
-    b = np.nanmedian(negative_demand(solver.with_neutral(common), landmarks, visible, frames))
-    return bool(a <= ANCHOR_DEMAND_RATIO * b)
-
-
-def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True) -> IdentityCalibration:
+def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True, start=None) -> IdentityCalibration:
     """``identity="auto"``: the person's neutral from the capture; ``solver`` is left as it is.
 
     1. The commonest posture: the quantile baseline (:func:`calibrate_identity`) on the rig's
@@ -384,14 +401,19 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True)
        residual. The rest face assumes the capture comes back to a face at rest; a capture that
        never does (every frame some expression) moves it into an expression, after which frames need
        negative weights and fit worse than with the quantile baseline alone, which is then kept.
-    2. With ``anchor`` (the default), the first frame's posture (:func:`calibrate_rest` anchored,
-       :func:`rest_frames`) replaces it when that posture recurs through the capture and, as a
-       neutral, demands no more negative weight than :data:`ANCHOR_DEMAND_RATIO` times the neutral of
-       step 1 (:func:`.onesided.negative_demand`: a rig's shapes are one-sided, so the rest face is
-       the one from which the capture's faces are reached with weights >= 0). A talking clip's
+    2. With ``anchor`` (the default), the take's start posture replaces it. A talking clip's
        commonest posture is speech (lips parted), not rest: with it as the neutral, closed lips read
-       as an expression (mouthStretch on cap13's calm start). A take that starts mid-sentence or on an
-       expression fails the demand test (2-7 times the demand on the real clips' cuts) and keeps step 1.
+       as an expression (mouthStretch on cap13's calm start). ``start`` (a :class:`.reststart.RestStart`,
+       the landmark evidence of a 68-point capture) decides: a start that is not still with closed
+       lips is never anchored; one that is gives the rest face of its window's median posture
+       (:func:`rest_frames`), kept unless, as a neutral, it demands more than :data:`ANCHOR_DEMAND_MAX`
+       times the negative weight of step 1's (:func:`.onesided.negative_demand`: a rig's shapes are
+       one-sided; a closed-lip smile held at the start is not rest). Without evidence (``start``
+       None: other layouts), the first frame's posture is taken when it recurs through the capture
+       and demands at most :data:`ANCHOR_DEMAND_RATIO` times step 1's (the test before the evidence).
+
+    The result records ``rest_start`` (the evidence's verdict, None without it) and ``demand_ratio``
+    (nan when the anchor was not tried).
     """
     v_start = solver.v0
     quant = calibrate_identity(solver, landmarks, visible)
@@ -402,13 +424,23 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True)
         if both.rms_after < quant.rms_after:
             common = IdentityCalibration(both.neutral - v_start, both.baseline, both.frames, quant.rms_before,
                                          both.rms_after, both.noise, True, True, both.applied, neutral=both.neutral)
-    if anchor:
-        first = calibrate_rest(solver, landmarks, visible, anchor=True)
-        if first.applied and first.rest_anchored and _one_sided(solver, first.neutral, common.neutral, landmarks,
-                                                                visible):
-            return replace(first, rest_applied=True)
-    return common
+    verdict = None if start is None else start.at_rest
+    common = replace(common, rest_start=verdict)
+    if not anchor or verdict is False:
+        return common
+    window = None if start is None else start.frames
+    first = calibrate_rest(solver, landmarks, visible, anchor=True, window=window, rms_before=rest.rms_before)
+    if not (first.applied and first.rest_anchored):
+        return common
+    ratio = demand_ratio(solver, first.neutral, common.neutral, landmarks, visible,
+                         pilot_frames(visible, CALIBRATION_FRAMES))
+    limit = ANCHOR_DEMAND_RATIO if start is None else ANCHOR_DEMAND_MAX
+    if ratio <= limit:
+        return replace(first, rest_applied=True, rest_start=verdict, demand_ratio=ratio)
+    return replace(common, demand_ratio=ratio)
 
 
-__all__ = ["IdentityCalibration", "calibrate_auto", "calibrate_identity", "calibrate_rest", "first_frame_offset", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES", "pilot_frames", "back_project", "CALIBRATION_FRAMES",
-           "CALIBRATION_ROUNDS", "BASELINE_QUANTILE", "MIN_GAIN", "OUTLIER"]
+__all__ = ["IdentityCalibration", "calibrate_auto", "ANCHOR_DEMAND_MAX", "calibrate_identity",
+           "calibrate_rest", "first_frame_offset", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES",
+           "pilot_frames", "back_project", "CALIBRATION_FRAMES", "CALIBRATION_ROUNDS", "BASELINE_QUANTILE",
+           "MIN_GAIN", "OUTLIER"]

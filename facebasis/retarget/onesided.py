@@ -66,4 +66,12 @@ def negative_demand(solver: FrameSolver, landmarks, visible, frames) -> np.ndarr
     return out
 
 
-__all__ = ["negative_demand", "DEMAND_PRIOR_STD"]
+def demand_ratio(solver: FrameSolver, first, common, landmarks, visible, frames) -> float:
+    """The median demand over ``frames`` (:func:`negative_demand`) of the neutral ``first`` (L, 3)
+    over that of the neutral ``common`` (inf when only the latter's is 0)."""
+    a = np.nanmedian(negative_demand(solver.with_neutral(first), landmarks, visible, frames))
+    b = np.nanmedian(negative_demand(solver.with_neutral(common), landmarks, visible, frames))
+    return float(a / b) if b > 0 else (1.0 if a <= 0 else float("inf"))
+
+
+__all__ = ["negative_demand", "demand_ratio", "DEMAND_PRIOR_STD"]

@@ -330,6 +330,14 @@ def _parse_ridge(ridge):
 FIRST_FRAME_HINT = 0.03
 
 
+#: the log's words for the landmark evidence of a start at rest (:mod:`.reststart`)
+_START = {True: " (the take starts at rest: still, lips closed)", False: " (the take does not start at rest)"}
+
+
+def _finite(v):
+    return float(v) if np.isfinite(v) else None
+
+
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
                  identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
@@ -382,10 +390,11 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
                       "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
         steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}"
-                 f"{' (at the first frame)' if cal.rest_anchored else ''}, quantile baseline "
+                 f"{' (at the first frame)' if cal.rest_anchored else ''}{_START.get(cal.rest_start, '')}, quantile baseline "
                  f"{'kept' if cal.quantile_applied else 'not kept'}" if identity == "auto" else "")
         extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied),
-                      "identity_rest_anchor": bool(rest_anchor), "identity_rest_anchored": bool(cal.rest_anchored)})
+                      "identity_rest_anchor": bool(rest_anchor), "identity_rest_anchored": bool(cal.rest_anchored),
+                      "identity_rest_start": cal.rest_start, "identity_demand_ratio": _finite(cal.demand_ratio)})
         _log(log, f"identity: static landmark offset estimated on {len(cal.frames)} pilot frames "
                   f"({moved:.3g} rig units rms){steps}; pilot residual {cal.rms_before:.2f} px with the rig's "
                   f"neutral, {cal.rms_after:.2f} px calibrated")

@@ -69,6 +69,7 @@ from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
 from .observe import Identifiability, identifiability, landmark_jacobian
+from .reststart import rest_start
 from .pose import (
     PI,
     fit_pose_affine,
@@ -244,9 +245,11 @@ class RigRetargeter:
         1 measures it as every other landmark), see :func:`.pose.contour_weights`
     sparsity : the exponential part of the weight prior, ``sparsity * rho * sum_i x_i``
         (:data:`DEFAULT_SPARSITY`; 0 leaves the Gaussian ridge alone)
-    rest_anchor : ``identity="auto"``: take the first frame's posture as the rest face when it recurs
-        and is one-sided enough (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps
-        the capture's commonest posture (the default before it)
+    rest_anchor : ``identity="auto"``: take the start's posture as the rest face when the take starts
+        at rest (a 68-point capture: still for 0.3 s with closed lips, :func:`.reststart.rest_start`;
+        other layouts: the first frame's posture recurs) and it is one-sided enough
+        (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps the capture's commonest
+        posture (the default before it)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
@@ -351,17 +354,18 @@ class RigRetargeter:
                 out.append(fit.rms / fit.s)
         return float(np.median(out)) if out else float("nan")
 
-    def settle(self, landmarks, visible) -> tuple[FrameSolver, IdentityCalibration | None, float]:
+    def settle(self, landmarks, visible, fps: float = 30.0) -> tuple[FrameSolver, IdentityCalibration | None, float]:
         """What a capture's frames are solved with: (the frame solver on the person's neutral and
         with the ridge of the "auto" rule, the identity calibration or None, the noise estimate (nan
-        when the ridge was given)). ``landmarks`` (T, L, 2) without NaN, ``visible`` (T, L) bool;
-        this retargeter is left as it is."""
+        when the ridge was given)). ``landmarks`` (T, L, 2) without NaN, ``visible`` (T, L) bool,
+        ``fps`` (the start window of :func:`.reststart.rest_start`); this retargeter is left as it is."""
         model, calibration, noise = self.model, None, float("nan")
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):
             if self.identity == "auto":
-                calibration = calibrate_auto(model, landmarks, visible, anchor=self.rest_anchor)
+                start = rest_start(landmarks, visible, fps) if self.rest_anchor else None
+                calibration = calibrate_auto(model, landmarks, visible, anchor=self.rest_anchor, start=start)
             else:
                 calibration = calibrate_identity(model, landmarks, visible)
             model = model.with_neutral(calibration.neutral)
@@ -390,7 +394,7 @@ class RigRetargeter:
         res, nodes = np.zeros(T), np.zeros(T, np.int64)
         state = None
         t0 = time.perf_counter()
-        model, calibration, noise = self.settle(np.nan_to_num(P), vis)
+        model, calibration, noise = self.settle(np.nan_to_num(P), vis, fps)
         for f in range(T):               # frames in order, each warm-started from the previous one
             fit = model.solve_frame(np.nan_to_num(P[f]), vis[f], state)
             X[f], S[f], Rs[f], Ts[f], res[f], nodes[f] = fit

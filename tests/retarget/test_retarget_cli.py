@@ -302,7 +302,14 @@ def test_rest_anchor_option(capture, tmp_path, capsys, monkeypatch):
         code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
         assert code == 0, stdout
         assert seen[-1] is want
-        assert json.loads((out / "summary.json").read_text())["identity_rest_anchor"] is want
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["identity_rest_anchor"] is want
+        # the landmark evidence on the take's start (None: not a 68-point capture) and the demand ratio
+        assert summary["identity_rest_start"] in (True, False, None)
+        ratio = summary["identity_demand_ratio"]
+        assert ratio is None or ratio >= 0
+        if not want:
+            assert summary["identity_rest_start"] is None and ratio is None and not summary["identity_rest_anchored"]
     assert inspect.signature(pipeline.run_retarget).parameters["rest_anchor"].default is True
     assert inspect.signature(original).parameters["rest_anchor"].default is True
     for argv, msg in ((["--rest-anchor", "maybe"], "invalid choice: 'maybe'"),

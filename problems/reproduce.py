@@ -225,7 +225,7 @@ RECIPES: tuple[Recipe, ...] = (
            data=("ict", "video", "detect"), script="problems/rig_plausibility.py"),
     Recipe("rest-cuts", "Calm-frame weights and left/right differences on cuts of the real clips every 2 s (dlib, "
            "MediaPipe and tracking-only captures), each cut's frame 0 labelled at rest or not by its landmarks",
-           ("retarget/rest_cuts.csv", "retarget/rest_cuts.md"),
+           ("retarget/rest_cuts.csv", "retarget/rest_cuts.md", "retarget/rest_cuts_summary.md"),
            CAPTURES + tuple(
                f"{{python}} -m facebasis.cli capture {{shared}}/data/video/{clip}.mp4 --detector mediapipe "
                f"--no-overlay --out {{tmp}}/{clip}_mp" for clip in ("cap12_edit", "cap13_edit2")) + tuple(
@@ -234,7 +234,8 @@ RECIPES: tuple[Recipe, ...] = (
            + (f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
               "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
               "'cap12:tracking={tmp}/cap12_edit_cuts/cap{{start}}' 'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' "
-              "--out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md",),
+              "--out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "
+              "--summary-md reports/retarget/rest_cuts_summary.md",),
            data=("ict", "video", "detect", "mediapipe"), script="problems/rest_cuts.py"),
     Recipe("real-clips", "The shared clips captured, retargeted onto ICT and animated on the cartoon: residuals, "
            "weights, inner lips, speed; weight plots and cartoon strips",

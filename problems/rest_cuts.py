@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from facebasis.atomic import atomic_write_bytes
 from problems.rig_plausibility import calm_frames, ict_problem, plausibility
 
 MIN_FRAMES = 150
@@ -230,7 +231,8 @@ def main(argv=None) -> int:
     ap.add_argument("--first", type=int, default=0, help="frame of the first cut's start")
     ap.add_argument("--merge", nargs="+", default=(), help="CSVs of earlier runs whose rows join these")
     ap.add_argument("--out", default=None, help="CSV of the rows")
-    ap.add_argument("--md", default=None, help="markdown summary")
+    ap.add_argument("--md", default=None, help="markdown summary and every cut")
+    ap.add_argument("--summary-md", default=None, help="markdown summary table alone (the docs include it)")
     ap.add_argument("--make-track-cuts", nargs=2, metavar=("VIDEO", "OUT_ROOT"))
     args = ap.parse_args(argv)
     if args.make_track_cuts:
@@ -248,8 +250,10 @@ def main(argv=None) -> int:
     if args.out and rows:
         write_rows(args.out, rows)
     if args.md and rows:
-        Path(args.md).write_text("# Calm-frame weights on cuts of the real clips (issue 23)\n\n"
-                                 + summary(rows) + "\n## Every cut\n\n" + cut_table(rows))
+        atomic_write_bytes(args.md, ("# Calm-frame weights on cuts of the real clips (issue 23)\n\n" + summary(rows)
+                                     + "\n## Every cut\n\n" + cut_table(rows)).encode())
+    if args.summary_md and rows:
+        atomic_write_bytes(args.summary_md, summary(rows).encode())
     return 0
 
 

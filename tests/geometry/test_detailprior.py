@@ -137,7 +137,23 @@ def test_cli_detail_prior_bad_value_and_repeat(tmp_path, capsys):
     base = ["register", str(tmp_path / "scan.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(tmp_path / "o")]
     parser_refuses(main, base + ["--detail-prior", "maybe"], capsys, "--detail-prior", "invalid choice: 'maybe'")
     parser_refuses(main, base + ["--detail-prior", "on", "--detail-prior", "off"], capsys, "--detail-prior")
+    parser_refuses(main, base + ["--identity-prior", "weak"], capsys, "--identity-prior", "invalid choice: 'weak'")
+    parser_refuses(main, base + ["--identity-prior", "noise", "--identity-prior", "fixed"], capsys, "--identity-prior")
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("given, modes, noise", [([], 150, True), (["--identity-prior", "noise"], 150, True),
+                                                 (["--identity-prior", "fixed"], 150, False),
+                                                 (["--detail-prior", "off", "--identity-prior", "fixed"], 0, False)])
+def test_cli_identity_prior_reaches_the_registration(tmp_path, monkeypatch, given, modes, noise):
+    import facebasis.geometry.registerfiles as rf
+
+    seen = {}
+    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
+    assert main(["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out",
+                 str(tmp_path / "o"), *given]) == 0
+    assert seen["opts"].detail == DetailPriorOptions(modes=modes, noise_prior=noise)
+    assert DetailPriorOptions().noise_prior is True  # the CLI's default is the library's
 
 
 def test_cli_detail_prior_on_and_off_register_through_the_identity_basis(tmp_path, capsys):

@@ -209,6 +209,13 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
             "--after-model normal --regions 12 --attribution --out reports/registration/noise_prior",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-noise-prior-off", "The same with the fixed prior (--noise-prior off): the baseline "
+           "beside registration-rig-noise-prior, with its held-out ratio on the scanned ranges",
+           ("registration/noise_prior_off/rig.csv", "registration/noise_prior_off/rig.md",
+            "registration/noise_prior_off/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
+            "--after-model normal --regions 12 --noise-prior off --out reports/registration/noise_prior_off",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

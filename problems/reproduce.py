@@ -154,19 +154,19 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig", "Rigs from registered scans against rigs from the exact examples (held-out error), "
            "persons inside and outside the identity space, fits with 100 and 60 modes; per-scan errors",
            ("registration/rig.csv", "registration/rig.md", "registration/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline",), data=("ict",),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --noise-prior off",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-normal", "The same with offsets along the fitted model's normals after the fits "
            "(--after-model normal)",
            ("registration/normal_stage/rig.csv", "registration/normal_stage/rig.md",
             "registration/normal_stage/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --after-model normal "
-            "--out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
+            "--noise-prior off --out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1", "The normal stage after the fits on a second person (seed 1, 100 and 60 modes)",
            ("registration/normal_stage_seed1/rig.csv", "registration/normal_stage_seed1/rig.md",
             "registration/normal_stage_seed1/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 60 "
-            "--after-model normal --out reports/registration/normal_stage_seed1",), data=("ict",),
+            "--after-model normal --noise-prior off --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
            "in-space person, seed 0; per-part errors in the rig's frame",
@@ -198,8 +198,24 @@ RECIPES: tuple[Recipe, ...] = (
            "after the fits, both persons, seeds 0 and 1",
            tuple(f"registration/defaults_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --train 12 --no-baseline "
-                 f"--fit-modes 100 --after-model nricp normal --regions 12 --out reports/registration/defaults_seed{s}"
+                 f"--fit-modes 100 --after-model nricp normal --regions 12 --noise-prior off "
+                 f"--out reports/registration/defaults_seed{s}"
                  for s in (0, 1)), data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-noise-prior", "The identity fit continued with the coefficients' prior at the noise "
+           "level (the default; eq. D2 of geometry/detailprior.py), both persons, seeds 0 and 1, with the held-out "
+           "ratio on the scanned ranges and its attribution; baseline: registration-rig-defaults (the fixed prior)",
+           ("registration/noise_prior/rig.csv", "registration/noise_prior/rig.md",
+            "registration/noise_prior/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
+            "--after-model normal --regions 12 --attribution --out reports/registration/noise_prior",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-noise-prior-off", "The same with the fixed prior (--noise-prior off): the baseline "
+           "beside registration-rig-noise-prior, with its held-out ratio on the scanned ranges",
+           ("registration/noise_prior_off/rig.csv", "registration/noise_prior_off/rig.md",
+            "registration/noise_prior_off/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
+            "--after-model normal --regions 12 --noise-prior off --out reports/registration/noise_prior_off",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

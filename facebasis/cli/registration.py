@@ -32,7 +32,8 @@ def cmd_register(args) -> int:
     opts = RegistrationOptions(after_model=args.after_model or "normal",
                                expression_regions=RegionOptions(
                                    count=12 if args.expression_regions is None else args.expression_regions),
-                               detail=DetailPriorOptions(modes=0) if args.detail_prior == "off" else DetailPriorOptions())
+                               detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes,
+                                                         noise_prior=args.identity_prior != "fixed"))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -74,6 +75,11 @@ def register(subparsers) -> None:
                    help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
                         "what the identity space cannot express is left to that field instead of sliding the "
                         "fitted points along the skin; 'off': the modes alone")
+    p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
+                   help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
+                        "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "
+                        "prior shrinks the coefficients, and the points slide along the skin where the surface "
+                        "cannot tell, e.g. the back of the head); 'fixed': the fixed prior throughout")
     p.add_argument("--detector", default=None, action=Once, choices=("dlib", "mediapipe"),
                    help="the 2D detector of --landmarks auto (default: the installed one)")
     p.add_argument("--neutral", default=None, metavar="NAME",

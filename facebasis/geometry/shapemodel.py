@@ -206,7 +206,7 @@ def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.n
 
 def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h: float,
                     options: ModelFitOptions = ModelFitOptions(), sigma=None, bounds=None,
-                    use: np.ndarray | None = None, c0=None) -> ModelFit:
+                    use: np.ndarray | None = None, c0=None, pose0: Similarity | None = None) -> ModelFit:
     """Fit ``pose(base + sum_k c_k deltas_k)`` to a scan surface (module docstring's energy).
 
     Parameters
@@ -221,6 +221,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     use : vertices that may pair with the scan (default all; at most ``options.samples`` of them, a
         seeded sample, are used)
     c0 : (K,) start coefficients (default 0, or clipped into the bounds)
+    pose0 : start pose (default the identity): with ``c0``, a fit continued from an earlier one
 
     Returns
     -------
@@ -235,7 +236,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     if len(use) > options.samples:  # a seeded sample of the vertices: the fit has few unknowns
         use = np.sort(use[np.random.default_rng(options.seed).choice(len(use), options.samples, replace=False)])
     npose = 7 if options.scale else 6
-    pose = Similarity()
+    pose = Similarity() if pose0 is None else pose0
     Dflat = deltas.reshape(K, -1)
     cos_max = np.cos(np.radians(options.normal_angle))
     rms, kept, it = np.inf, 0, 0

@@ -56,16 +56,53 @@ def _person_with_detail(k=12):
 def test_detail_outside_the_space_no_longer_slides_the_fitted_correspondence():
     T, F, basis, c, S, G, truth = _person_with_detail()
     out = {}
-    for m in (0, 60):
-        res = Registration(T, F, RegistrationOptions(after_model="normal", detail=DetailPriorOptions(modes=m)),
+    for m, noise in ((0, False), (60, False), (60, True)):
+        res = Registration(T, F, RegistrationOptions(after_model="normal",
+                                                     detail=DetailPriorOptions(modes=m, noise_prior=noise)),
                            identity=basis).register(S, G)
         err = np.linalg.norm(res.vertices - truth, axis=1)
-        out[m] = np.abs(res.model.coefficients - c).max(), np.median(err), np.percentile(err, 95)
+        out[m, noise] = np.abs(res.model.coefficients - c).max(), np.median(err), np.percentile(err, 95)
         assert len(res.model.coefficients) == len(c) and set(res.report()["identity"]["coefficients"]) == set(basis.names)
     # modes only: the modes also take the field, so their coefficients and the points slide (measured 0.43,
     # 0.035 / 0.121 cm); with the field beside them: 0.18, 0.029 / 0.084
-    assert out[60][0] < 0.6 * out[0][0]
-    assert out[60][1] < 0.9 * out[0][1] and out[60][2] < 0.8 * out[0][2]
+    fixed, plain, noise = out[60, False], out[0, False], out[60, True]
+    assert fixed[0] < 0.6 * plain[0]
+    assert fixed[1] < 0.9 * plain[1] and fixed[2] < 0.8 * plain[2]
+    # continued with the noise-level prior (eq. D2): the points closer still (measured 0.022 / 0.060 cm); the
+    # modes and the field trade more freely (both are smooth normal displacements), so the coefficients
+    # alone are not the measure here
+    assert noise[1] < 0.9 * fixed[1] and noise[2] < 0.85 * fixed[2]
+
+
+def test_the_noise_level_prior_recovers_what_the_fixed_prior_shrinks():
+    from test_shapemodel import as_scan, face, modes
+
+    rig = face()
+    T, F = rig.neutral, rig.faces
+    D = 0.3 * modes(T, 12, seed=3)  # modes of ~1.5 mm: the fixed prior (1e-4) shrinks them
+    c = np.random.default_rng(2).standard_normal(12)
+    person = T + np.tensordot(c, D, 1)
+    S, G, R, t = as_scan(person, F, seed=2)
+    S = S + 0.02 * np.random.default_rng(5).standard_normal(S.shape)  # 0.2 mm noise
+    basis, out = ShapeBasis(tuple(f"m{k}" for k in range(12)), D, "test"), {}
+    for noise in (False, True):
+        res = Registration(T, F, RegistrationOptions(detail=DetailPriorOptions(modes=30, noise_prior=noise)),
+                           identity=basis).register(S, G)
+        err = np.linalg.norm(res.vertices - (person @ R.T + t), axis=1)
+        out[noise] = np.sqrt(np.mean((res.model.coefficients - c) ** 2)), np.median(err)
+    # measured: coefficients 0.20 -> 0.045 RMS, points 0.0087 -> 0.0055 cm median
+    assert out[True][0] < 0.6 * out[False][0] and out[True][1] < out[False][1]
+
+
+def test_noise_prior_is_the_gaussian_weight_within_its_bounds():
+    from facebasis.geometry.detailprior import NOISE_PRIOR_FLOOR, noise_prior
+    from facebasis.geometry.rigid import Similarity
+    from facebasis.geometry.shapemodel import ModelFit
+
+    fit = lambda rms, p: ModelFit(np.zeros((3, 3)), np.zeros(2), Similarity(), rms, p, 1)  # noqa: E731
+    assert noise_prior(fit(0.02, 4000), 0.3, 1e-4) == pytest.approx(0.02 ** 2 / (4000 * 0.3 ** 2))
+    assert noise_prior(fit(1.0, 10), 0.3, 1e-4) == 1e-4  # never stronger than the fixed prior
+    assert noise_prior(fit(0.0, 4000), 0.3, 1e-4) == pytest.approx(NOISE_PRIOR_FLOOR * 1e-4)  # a noise-free scan
 
 
 def test_several_parts_follow_the_fit_with_the_detail_prior():
@@ -88,6 +125,8 @@ def test_several_parts_follow_the_fit_with_the_detail_prior():
     ({"modes": True}, r"detail\.modes: expected an integer >= 0, found True"),
     ({"length": 0.0}, r"detail\.length: expected a positive number, found 0.0"),
     ({"amplitude": float("nan")}, r"detail\.amplitude: expected a positive number, found nan"),
+    ({"noise_prior": "yes"}, r"detail\.noise_prior: expected True or False, found 'yes'"),
+    ({"noise_prior": 1}, r"detail\.noise_prior: expected True or False, found 1"),
 ])
 def test_bad_detail_prior_options_are_refused(kw, match):
     with pytest.raises(InputError, match=match):
@@ -98,7 +137,23 @@ def test_cli_detail_prior_bad_value_and_repeat(tmp_path, capsys):
     base = ["register", str(tmp_path / "scan.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(tmp_path / "o")]
     parser_refuses(main, base + ["--detail-prior", "maybe"], capsys, "--detail-prior", "invalid choice: 'maybe'")
     parser_refuses(main, base + ["--detail-prior", "on", "--detail-prior", "off"], capsys, "--detail-prior")
+    parser_refuses(main, base + ["--identity-prior", "weak"], capsys, "--identity-prior", "invalid choice: 'weak'")
+    parser_refuses(main, base + ["--identity-prior", "noise", "--identity-prior", "fixed"], capsys, "--identity-prior")
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("given, modes, noise", [([], 150, True), (["--identity-prior", "noise"], 150, True),
+                                                 (["--identity-prior", "fixed"], 150, False),
+                                                 (["--detail-prior", "off", "--identity-prior", "fixed"], 0, False)])
+def test_cli_identity_prior_reaches_the_registration(tmp_path, monkeypatch, given, modes, noise):
+    import facebasis.geometry.registerfiles as rf
+
+    seen = {}
+    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
+    assert main(["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out",
+                 str(tmp_path / "o"), *given]) == 0
+    assert seen["opts"].detail == DetailPriorOptions(modes=modes, noise_prior=noise)
+    assert DetailPriorOptions().noise_prior is True  # the CLI's default is the library's
 
 
 def test_cli_detail_prior_on_and_off_register_through_the_identity_basis(tmp_path, capsys):

@@ -30,8 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .mouth2d import (INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, draw_opening, fill_mouth, mouth_is_cut,
-                      polygon_area)
+from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
 
@@ -250,8 +249,8 @@ class CartoonAnimator:
             self._smooth = biharmonic_basis(self.warp_rest, self.warp_faces, handles)[L:n, :L]   # (N - L, L)
         self.mouth_cut = mouth_is_cut(self.faces, L)
         # the mouth (:mod:`.mouth2d`): a cut mesh gets its inner-lip triangles back for drawing only,
-        # and the opening is darkened by the part the target's own mouth cannot show
-        self.rest_mouth_area = float(polygon_area(self.rest[INNER_LIP_68])) if L == 68 else None
+        # and with 68 landmarks the opening is drawn as a dark interior
+        self.draws_mouth = L == 68
         self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces
         self.fold_free = bool(fold_free)
         self.solver = None
@@ -337,15 +336,15 @@ class CartoonAnimator:
     def warp(self, cartoon_vertices) -> np.ndarray:
         """The cartoon warped so that ``rest`` moves to ``cartoon_vertices`` (N, 2); (H, W, C) uint8.
 
-        With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67) is darkened by the part
-        of it the target's own mouth cannot show (:func:`.mouth2d.draw_opening`: a closed-mouth
-        painting driven open shows a dark opening, not stretched lips); a capture mesh cut open along
-        closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
+        With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67), when open, is drawn as a
+        dark mouth interior (:func:`.mouth2d.fill_mouth`: a closed-mouth painting driven open shows a
+        dark opening, not stretched lips; the target's own teeth are not shown); a capture mesh cut
+        open along closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
         (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap."""
         V = np.asarray(cartoon_vertices, np.float64)
         out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
-        if self.rest_mouth_area is not None:
-            draw_opening(out, V[INNER_LIP_68], self.rest_mouth_area)
+        if self.draws_mouth:
+            fill_mouth(out, V[INNER_LIP_68])
         return out
 
     def frame_at(self, drive: CartoonDrive, t: int) -> np.ndarray:

@@ -6,8 +6,7 @@ import pytest
 
 from facebasis.capture.facemesh import build_face_mesh
 from facebasis.defaults.cartoon import cartoon_landmarks
-from facebasis.retarget.mouth2d import (INNER_LIP_68, MOUTH_INTERIOR_RGB, draw_opening, mouth_is_cut,
-                                        opening_opacity, polygon_area)
+from facebasis.retarget.mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, fill_mouth, mouth_is_cut, polygon_area
 from facebasis.retarget.warp2d import CartoonAnimator
 
 SKIN, LIP = (236, 200, 170), (200, 70, 80)
@@ -60,7 +59,7 @@ def test_a_closed_mouth_face_driven_open_shows_a_dark_opening_proportional_to_it
     mesh = build_face_mesh(cap)
     assert mouth_is_cut(mesh.faces, 68) == (start_gap == 0.0)
     anim = CartoonAnimator(img, lm, cap, mesh.vertices, mesh.faces, fold_free=False)
-    assert anim.rest_mouth_area == pytest.approx(0.0, abs=1e-6)
+    assert polygon_area(anim.rest[INNER_LIP_68]) == pytest.approx(0.0, abs=1e-6)
     rest = anim.frame(mesh.vertices)
     assert _dark_inside(rest, anim.rest[INNER_LIP_68])[0] == 0          # closed: nothing drawn
     drops = np.array([4.0, 8.0, 12.0, 16.0, 20.0])
@@ -72,17 +71,33 @@ def test_a_closed_mouth_face_driven_open_shows_a_dark_opening_proportional_to_it
     assert np.all(np.diff(dark) > 0)
 
 
-def test_an_open_mouth_keeps_its_own_interior_at_rest_and_darkens_by_the_new_part():
-    """A target drawn with an open mouth: at rest its own mouth is shown unchanged; as the polygon
-    grows to k times its rest area the interior is blended towards dark with opacity 1 - 1/k."""
-    assert opening_opacity(100.0, 100.0) == 0.0 and opening_opacity(50.0, 100.0) == 0.0
-    assert opening_opacity(400.0, 100.0) == pytest.approx(0.75)
-    assert opening_opacity(10.0, 0.0) == 1.0
+def test_a_face_drawn_with_an_open_mouth_shows_a_dark_opening_not_its_stretched_teeth():
+    """The built-in cartoon (teeth drawn between open lips), uncut Delaunay mesh: at rest the frame
+    is the image except inside the lips, which are dark; opened further, the whole opening is dark."""
+    from scipy.spatial import Delaunay
+
+    from facebasis.defaults.cartoon import default_cartoon
+
+    face = default_cartoon()
+    lm = np.array(face.landmarks, float)
+    anim = CartoonAnimator(np.array(face.image), lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
+    assert not anim.mouth_cut
+    for d in (0.0, 10.0, 20.0):
+        V = _drop(lm, d)
+        dark, area, perimeter = _dark_inside(anim.frame(V), V[INNER_LIP_68])
+        assert 0.8 * area <= dark <= area + perimeter + 8
+
+
+def test_fill_mouth_blends_only_inside_an_open_polygon():
     img = np.full((60, 60, 3), 200, np.uint8)
     poly = np.array([[10, 30], [20, 25], [30, 24], [40, 25], [50, 30], [40, 35], [30, 36], [20, 35]], float)
     out = img.copy()
-    assert draw_opening(out, poly, polygon_area(poly)) == 0.0 and np.array_equal(out, img)
-    assert draw_opening(out, poly, 0.5 * polygon_area(poly)) == pytest.approx(0.5)
-    centre = out[30, 30].astype(float)
-    np.testing.assert_allclose(centre, 0.5 * (200 + np.array(MOUTH_INTERIOR_RGB)), atol=1)
+    fill_mouth(out, np.repeat(poly[:1], 8, axis=0))            # closed: nothing drawn
+    assert np.array_equal(out, img)
+    fill_mouth(out, poly, opacity=0.5)
+    np.testing.assert_allclose(out[30, 30].astype(float), 0.5 * (200 + np.array(MOUTH_INTERIOR_RGB)), atol=1)
     assert np.array_equal(out[:20], img[:20]) and np.array_equal(out[40:], img[40:])
+    fill_mouth(out, poly)
+    assert np.array_equal(out[30, 30], MOUTH_INTERIOR_RGB)
+    assert polygon_area(poly) == pytest.approx(0.5 * abs(np.dot(poly[:, 0], np.roll(poly[:, 1], -1))
+                                                         - np.dot(poly[:, 1], np.roll(poly[:, 0], -1))))

@@ -5,7 +5,7 @@
         [--warp-every K]
 
 For every capture folder (``facebasis capture`` output) and every target image (the built-in
-cartoon, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
+cartoon, the same with its lips closed, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
 (``cv2.stylization``) version of it, with dlib's landmarks), three ways of driving the cartoon:
 
 * ``paper``: eq. 12 as it is (the head's motion included, no fold handling), the earlier default;
@@ -67,14 +67,29 @@ def _cameraman():
     return np.ascontiguousarray(big[:512, 100:612])
 
 
+def closed_mouth_cartoon(image, landmarks):
+    """The built-in cartoon with its lips closed by the warp itself (the lower lip moved up onto the
+    upper inner lip, teeth hidden): a drawn face whose mouth is shut at rest, the case of most
+    paintings and portraits. Returns (image (H, W, 3) uint8, landmarks (68, 2))."""
+    from scipy.spatial import Delaunay
+
+    lm = np.asarray(landmarks, np.float64)
+    closed = lm.copy()
+    gap = lm[[67, 66, 65], 1] - lm[[61, 62, 63], 1]
+    closed[[67, 66, 65], 1] -= gap
+    closed[55:60, 1] -= gap.mean()
+    anim = CartoonAnimator(image, lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
+    return anim.frame(closed), closed
+
+
 def target_images(detector):
     """[(name, image (H, W, 3) uint8 RGB, landmarks (68, 2))]: several faces, drawn, photographed and
-    painted: the built-in cartoon, the same stretched 1.3x wide, scikit-image's astronaut and
+    painted: the built-in cartoon, the same with its lips closed, the same stretched 1.3x wide, scikit-image's astronaut and
     cameraman photographs and painted versions of both (dlib's landmarks on each)."""
     import cv2
 
     face = default_cartoon()
-    out = [("cartoon", face.image, face.landmarks)]
+    out = [("cartoon", face.image, face.landmarks), ("cartoon-closed",) + closed_mouth_cartoon(face.image, face.landmarks)]
     wide = cv2.resize(face.image, (int(round(1.3 * 512)), 512), interpolation=cv2.INTER_AREA)
     out.append(("cartoon-wide", wide, face.landmarks * [wide.shape[1] / 512.0, 1.0]))
     try:

@@ -268,11 +268,13 @@ RECIPES: tuple[Recipe, ...] = (
                        "cp {tmp}/cartoon/bench_cartoon.md reports/reproduction/cartoon_warp.md"),
            data=("video", "detect"), script="problems/bench_cartoon.py"),
     Recipe("cartoon-expression", "Expressions kept on the shared clips, per feature: capture / warp / detector "
-           "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still)",
+           "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still), "
+           "detector and tracking-only captures",
            ("reproduction/cartoon_expression.csv", "reproduction/cartoon_expression.md"),
-           CAPTURES + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det --modes uniform,still "
-                       "--images cartoon,astronaut,astronaut-painted,cameraman --check-every 10 --warp-every 20 "
-                       "--out {tmp}/expression",
+           CAPTURES + TRACKED + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
+                                 "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --modes uniform,still "
+                                 "--images cartoon,cartoon-closed,astronaut,astronaut-painted,cameraman "
+                                 "--check-every 10 --warp-every 20 --out {tmp}/expression",
                        "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",
                        "cp {tmp}/expression/bench_cartoon.md reports/reproduction/cartoon_expression.md"),
            data=("video", "detect"), script="problems/bench_cartoon.py"),

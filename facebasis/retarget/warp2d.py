@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
 
@@ -141,38 +142,6 @@ def close_contacts(meshes, rest, contacts=CONTACTS_68, sigma: float = 0.15) -> n
     return M[0] if single else M
 
 
-#: the inner-lip ring of the 68-point iBUG set, in order around the mouth opening
-INNER_LIP_68 = np.arange(60, 68)
-#: the colour of an open mouth's interior (RGB), drawn where a cut mesh leaves the opening uncovered
-MOUTH_INTERIOR_RGB = (72, 24, 34)
-
-
-def mouth_is_cut(faces, n_landmarks: int) -> bool:
-    """Whether a 68-point capture mesh has no triangle joining the upper inner lip (61-63) to the
-    lower (65-67): the mesh was cut open along closed lips (:func:`facebasis.capture.facemesh.build_face_mesh`)."""
-    if n_landmarks != 68:
-        return False
-    F = np.asarray(faces, np.int64)
-    upper = np.isin(F, (61, 62, 63)).any(1)
-    lower = np.isin(F, (65, 66, 67)).any(1)
-    return not bool((upper & lower).any())
-
-
-def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB) -> None:
-    """Fill the polygon ``inner_lip`` (8, 2) of ``image`` (H, W, C) uint8 in place with ``colour``
-    (anti-aliased edge), when the polygon is open (area above a quarter pixel)."""
-    import cv2
-
-    P = np.asarray(inner_lip, np.float64)
-    x, y = P[:, 0], P[:, 1]
-    if 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) <= 0.25:
-        return
-    shift = 4  # sub-pixel vertices (1/16 px)
-    pts = np.round(P * (1 << shift)).astype(np.int32)[None]
-    col = tuple(int(c) for c in colour)[: image.shape[2]] + (255,) * max(0, image.shape[2] - 3)
-    cv2.fillPoly(image, pts, col, lineType=cv2.LINE_AA, shift=shift)
-
-
 @dataclass(frozen=True)
 class CartoonDrive:
     """The cartoon mesh of every frame, as :meth:`CartoonAnimator.drive` plans it.
@@ -279,6 +248,10 @@ class CartoonAnimator:
             # columns of the ring handles are not needed: the ring never moves
             self._smooth = biharmonic_basis(self.warp_rest, self.warp_faces, handles)[L:n, :L]   # (N - L, L)
         self.mouth_cut = mouth_is_cut(self.faces, L)
+        # the mouth (:mod:`.mouth2d`): a cut mesh gets its inner-lip triangles back for drawing only,
+        # and with 68 landmarks the opening is drawn as a dark interior
+        self.draws_mouth = L == 68
+        self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces
         self.fold_free = bool(fold_free)
         self.solver = None
         if self.fold_free:
@@ -363,13 +336,14 @@ class CartoonAnimator:
     def warp(self, cartoon_vertices) -> np.ndarray:
         """The cartoon warped so that ``rest`` moves to ``cartoon_vertices`` (N, 2); (H, W, C) uint8.
 
-        When the capture's mesh is cut open along closed lips (a take that starts with the mouth
-        shut, :func:`mouth_is_cut`), no triangle covers the mouth as it opens: the opening (the inner
-        lip polygon, iBUG 60-67) is drawn as a dark mouth interior instead of showing the rest
-        cartoon's closed lips through the gap."""
+        With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67), when open, is drawn as a
+        dark mouth interior (:func:`.mouth2d.fill_mouth`: a closed-mouth painting driven open shows a
+        dark opening, not stretched lips; the target's own teeth are not shown); a capture mesh cut
+        open along closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
+        (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap."""
         V = np.asarray(cartoon_vertices, np.float64)
-        out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.warp_faces)
-        if self.mouth_cut:
+        out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
+        if self.draws_mouth:
             fill_mouth(out, V[INNER_LIP_68])
         return out
 
@@ -420,5 +394,5 @@ def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices,
     return CartoonAnimation(frames, drive.meshes, anim.faces, anim.scale, anim.rest)
 
 
-__all__ = ["static_band", "close_contacts", "CONTACTS_68", "INTERIOR_MODES", "CartoonDrive", "CartoonAnimator",
+__all__ = ["static_band", "close_contacts", "fill_mouth", "mouth_is_cut", "MOUTH_INTERIOR_RGB", "CONTACTS_68", "INTERIOR_MODES", "CartoonDrive", "CartoonAnimator",
            "CartoonAnimation", "animate_cartoon"]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
+from conftest import same_outside_mouth
 from facebasis.defaults.cartoon import default_cartoon
 from facebasis.errors import InputError
 from facebasis.retarget.raster2d import rasterize_maps, warp_image
@@ -27,7 +28,9 @@ def test_zero_motion_returns_the_image_exactly():
     lm = face.landmarks
     anim = CartoonAnimator(face.image, lm, lm, lm, Delaunay(lm).simplices)
     assert anim.scale == pytest.approx(1.0)
-    assert np.array_equal(anim.frame(lm), face.image)
+    assert same_outside_mouth(anim.frame(lm), face.image, lm)    # exact outside the open mouth
+    no_mouth = CartoonAnimator(face.image, lm[:60], lm[:60], lm[:60], Delaunay(lm[:60]).simplices)
+    assert np.array_equal(no_mouth.frame(lm[:60]), face.image)
 
 
 def test_translation_moves_the_image():
@@ -66,11 +69,14 @@ def test_animate_cartoon_moves_mesh_by_scaled_displacements():
     assert res.scale == pytest.approx(0.5)
     np.testing.assert_allclose(res.rest, lm_img, atol=1e-6)
     np.testing.assert_allclose(res.meshes, np.stack([lm_img, lm_img]), atol=1e-9)
-    assert np.array_equal(res.frames[1], face.image)
+    # the rest frame is the image (its open mouth drawn dark, facebasis.retarget.mouth2d); frame 1 the same
+    rest = res.frames[0]
+    assert same_outside_mouth(rest, face.image, lm_img)
+    assert np.array_equal(res.frames[1], rest)
     res = animate_cartoon(face.image, lm_img, V, V, Delaunay(lm_cap).simplices, head="follow")
     np.testing.assert_allclose(res.meshes[1] - res.meshes[0], np.tile([2.0, 0.0], (68, 1)), atol=1e-9)
-    assert np.array_equal(res.frames[0], face.image)
-    np.testing.assert_array_equal(res.frames[1][:, 2:], face.image[:, :-2])   # the whole image moved 2 px
+    assert np.array_equal(res.frames[0], rest)
+    np.testing.assert_array_equal(res.frames[1][:, 2:], rest[:, :-2])   # the whole image moved 2 px
     # the paper's eq. 12 alone moves the mesh inside the still image
     anim = CartoonAnimator(face.image, lm_img, lm_cap, lm_cap, Delaunay(lm_cap).simplices)
     np.testing.assert_allclose(anim.mesh(V[1]) - lm_img, np.tile([2.0, 0.0], (68, 1)), atol=1e-9)

@@ -1,0 +1,103 @@
+"""The mouth of the cartoon warp (facebasis.retarget.mouth2d): a closed-mouth face driven open shows a
+dark opening as large as the opening, for a capture mesh cut along the lips and for an uncut one."""
+
+import numpy as np
+import pytest
+
+from facebasis.capture.facemesh import build_face_mesh
+from facebasis.defaults.cartoon import cartoon_landmarks
+from facebasis.retarget.mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, fill_mouth, mouth_is_cut, polygon_area
+from facebasis.retarget.warp2d import CartoonAnimator
+
+SKIN, LIP = (236, 200, 170), (200, 70, 80)
+
+
+def closed_mouth_face():
+    """A 512 x 512 face drawn in code with its lips closed: skin, a red mouth whose inner lips meet
+    on one line (iBUG 61-63 on 67-65), dark eyes; returns (image, landmarks (68, 2))."""
+    import cv2
+
+    lm = cartoon_landmarks().copy()
+    mid = 0.5 * (lm[[61, 62, 63]] + lm[[67, 66, 65]])
+    lm[[61, 62, 63]] = mid
+    lm[[67, 66, 65]] = mid
+    img = np.zeros((512, 512, 3), np.uint8)
+    img[:] = (225, 235, 245)
+    cv2.fillPoly(img, [np.round(lm[:17]).astype(np.int32).reshape(-1, 1, 2)], SKIN)
+    cv2.ellipse(img, (256, 250), (150, 200), 0, 180, 360, SKIN, -1)
+    cv2.fillPoly(img, [np.round(lm[48:60]).astype(np.int32).reshape(-1, 1, 2)], LIP)
+    cv2.polylines(img, [np.round(lm[[60, 61, 62, 63, 64]]).astype(np.int32).reshape(-1, 1, 2)], False, (120, 30, 40), 2)
+    for eye in (lm[36:42], lm[42:48]):
+        cv2.fillPoly(img, [np.round(eye).astype(np.int32).reshape(-1, 1, 2)], (40, 40, 40))
+    return img, lm
+
+
+def _dark_inside(frame, poly):
+    """Pixels inside ``poly`` (edge pixels included) within 12 of the mouth interior's colour, the
+    polygon's area and its perimeter."""
+    import cv2
+
+    mask = np.zeros(frame.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [np.round(poly).astype(np.int32).reshape(-1, 1, 2)], 1)
+    dark = np.abs(frame.astype(int) - MOUTH_INTERIOR_RGB).max(-1) <= 12
+    perimeter = float(np.linalg.norm(np.diff(np.r_[poly, poly[:1]], axis=0), axis=1).sum())
+    return int(np.count_nonzero(dark & (mask > 0))), float(polygon_area(poly)), perimeter
+
+
+def _drop(V, d):
+    """The capture with the lower lip (inner and outer) and the chin moved down by d px."""
+    out = np.array(V, float)
+    out[np.r_[65:68, 55:60, 6:11], 1] += d
+    return out
+
+
+@pytest.mark.parametrize("start_gap", [0.0, 10.0], ids=["cut", "uncut"])
+def test_a_closed_mouth_face_driven_open_shows_a_dark_opening_proportional_to_it(start_gap):
+    img, lm = closed_mouth_face()
+    cap = lm.copy()
+    cap[[65, 66, 67], 1] += start_gap                   # the take's first frame: closed, or a little open
+    mesh = build_face_mesh(cap)
+    assert mouth_is_cut(mesh.faces, 68) == (start_gap == 0.0)
+    anim = CartoonAnimator(img, lm, cap, mesh.vertices, mesh.faces, fold_free=False)
+    assert polygon_area(anim.rest[INNER_LIP_68]) == pytest.approx(0.0, abs=1e-6)
+    rest = anim.frame(mesh.vertices)
+    assert _dark_inside(rest, anim.rest[INNER_LIP_68])[0] == 0          # closed: nothing drawn
+    drops = np.array([4.0, 8.0, 12.0, 16.0, 20.0])
+    dark, area, perimeter = np.array([_dark_inside(anim.frame(_drop(mesh.vertices, d)),
+                                        anim.mesh(_drop(mesh.vertices, d))[INNER_LIP_68]) for d in drops]).T
+    # the opening is dark, not stretched lips: (nearly) all of the inner-lip polygon, growing with the drop
+    assert np.all(dark >= 0.8 * area) and np.all(dark <= area + perimeter + 8)
+    assert 0.9 <= np.polyfit(area, dark, 1)[0] <= 1.1 and np.corrcoef(dark, drops)[0, 1] > 0.99
+    assert np.all(np.diff(dark) > 0)
+
+
+def test_a_face_drawn_with_an_open_mouth_shows_a_dark_opening_not_its_stretched_teeth():
+    """The built-in cartoon (teeth drawn between open lips), uncut Delaunay mesh: at rest the frame
+    is the image except inside the lips, which are dark; opened further, the whole opening is dark."""
+    from scipy.spatial import Delaunay
+
+    from facebasis.defaults.cartoon import default_cartoon
+
+    face = default_cartoon()
+    lm = np.array(face.landmarks, float)
+    anim = CartoonAnimator(np.array(face.image), lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
+    assert not anim.mouth_cut
+    for d in (0.0, 10.0, 20.0):
+        V = _drop(lm, d)
+        dark, area, perimeter = _dark_inside(anim.frame(V), V[INNER_LIP_68])
+        assert 0.8 * area <= dark <= area + perimeter + 8
+
+
+def test_fill_mouth_blends_only_inside_an_open_polygon():
+    img = np.full((60, 60, 3), 200, np.uint8)
+    poly = np.array([[10, 30], [20, 25], [30, 24], [40, 25], [50, 30], [40, 35], [30, 36], [20, 35]], float)
+    out = img.copy()
+    fill_mouth(out, np.repeat(poly[:1], 8, axis=0))            # closed: nothing drawn
+    assert np.array_equal(out, img)
+    fill_mouth(out, poly, opacity=0.5)
+    np.testing.assert_allclose(out[30, 30].astype(float), 0.5 * (200 + np.array(MOUTH_INTERIOR_RGB)), atol=1)
+    assert np.array_equal(out[:20], img[:20]) and np.array_equal(out[40:], img[40:])
+    fill_mouth(out, poly)
+    assert np.array_equal(out[30, 30], MOUTH_INTERIOR_RGB)
+    assert polygon_area(poly) == pytest.approx(0.5 * abs(np.dot(poly[:, 0], np.roll(poly[:, 1], -1))
+                                                         - np.dot(poly[:, 1], np.roll(poly[:, 0], -1))))

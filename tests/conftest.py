@@ -20,18 +20,6 @@ def parser_refuses(main, argv, capsys, *needles):
     assert e.value.code == 2 and all(n in err for n in needles), err
 
 
-def same_outside_mouth(frame, image, landmarks) -> bool:
-    """A cartoon ``frame`` equals ``image`` outside the inner-lip polygon (iBUG 60-67) of
-    ``landmarks`` (grown by 1 px for its anti-aliased edge) and differs inside: the warp draws an
-    open mouth dark (facebasis.retarget.mouth2d)."""
-    import cv2
-
-    inside = np.zeros(image.shape[:2], np.uint8)
-    cv2.fillPoly(inside, [np.round(np.asarray(landmarks)[60:68]).astype(np.int32).reshape(-1, 1, 2)], 1)
-    inside = cv2.dilate(inside, np.ones((3, 3), np.uint8)) > 0
-    return np.array_equal(frame[~inside], image[~inside]) and not np.array_equal(frame[inside], image[inside])
-
-
 def grid_sheet(nx=6, ny=5, z=0.0, size=1.0):
     """A flat triangulated sheet in the plane z, (V, F)."""
     xs, ys = np.meshgrid(np.linspace(0, size, nx), np.linspace(0, size * 0.8, ny), indexing="xy")

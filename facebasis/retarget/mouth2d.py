@@ -9,9 +9,12 @@ capture mesh cut open along closed lips (:func:`mouth_is_cut`) has no triangle t
 target's still pixels showed through the gap.
 
 :func:`fill_mouth` therefore draws the opening, the inner-lip polygon (iBUG 60-67) of the frame, as
-a dark mouth interior whenever it is open, whatever the target draws there and whether the capture
-mesh is cut or not: a closed-mouth painting driven open shows a dark opening exactly as large as the
-opening. Measured on cap13 (dlib capture, every 10th frame, dlib on the output against the warped
+a dark mouth interior as it opens beyond the target's own mouth, whether the capture mesh is cut or
+not, with the opacity :func:`opening_opacity` ``clip(A_t / A_rest - 1, 0, 1)`` (``A`` the polygon's
+area over the squared mouth width, ``A_rest`` the target's own, at least a quarter pixel): the target at rest is left exactly as it
+is drawn (a capture that does not move leaves the cartoon unchanged), a closed-mouth painting driven
+open shows a dark opening as large as the opening (its ``A_rest`` is about 0, so any opening is
+opaque), and a mouth drawn open darkens until it is twice its drawn area. Measured on cap13 (dlib capture, every 10th frame, dlib on the output against the warped
 landmarks, median of the four measures), against blending the target's own interior towards dark
 by ``1 - A_rest / A_t`` (``A`` the polygon's area): astronaut 0.84 against 0.78, its painting 0.30
 against 0.17, the built-in cartoon 0.40 against 0.33, the cameraman 0.49 both: a detector reads a
@@ -52,15 +55,38 @@ def polygon_area(P) -> np.ndarray:
     return 0.5 * np.abs((x * np.roll(y, -1, axis=-1) - y * np.roll(x, -1, axis=-1)).sum(-1))
 
 
+#: the smallest polygon area (px^2) counted as open
+MIN_OPEN_AREA = 0.25
+
+
+def opening_opacity(mouth, rest_mouth) -> float:
+    """Opacity of the drawn mouth interior for the inner-lip polygon ``mouth`` (8, 2) of a frame
+    against the target's own ``rest_mouth`` (8, 2): ``clip(a / max(a_rest, MIN_OPEN_AREA / w_rest^2) - 1,
+    0, 1)`` with ``a = A / w^2`` the polygon's area over the squared width between the mouth corners
+    (iBUG 60 and 64), so that a head that comes closer (a similarity) does not open the mouth; 0 while
+    the opening is no larger than the target's own mouth, 1 from twice its area on."""
+    def shape(P):
+        P = np.asarray(P, np.float64)
+        w2 = max(float(np.sum((P[0] - P[4]) ** 2)), 1e-12)
+        return float(polygon_area(P)) / w2, w2
+
+    a, _ = shape(mouth)
+    a_rest, w2_rest = shape(rest_mouth)
+    return float(np.clip(a / max(a_rest, MIN_OPEN_AREA / w2_rest) - 1.0, 0.0, 1.0))
+
+
 def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0) -> None:
-    """Blend the polygon ``inner_lip`` (8, 2) of ``image`` (H, W, C) uint8 in place towards
-    ``colour`` with ``opacity`` (anti-aliased edge), when the polygon is open (area above a quarter
-    pixel) and the opacity above 1/255. Only the polygon's bounding box is touched."""
+    """Blend the polygon ``inner_lip`` (8, 2) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4)
+    uint8 in place towards ``colour`` (RGB; its luma on a grey image, opaque alpha) with ``opacity``
+    (anti-aliased edge), when the polygon is open (area above :data:`MIN_OPEN_AREA`) and the opacity
+    above 1/255. Only the polygon's bounding box is touched."""
     import cv2
 
     P = np.asarray(inner_lip, np.float64)
-    if polygon_area(P) <= 0.25 or opacity * 255.0 < 1.0:
+    if polygon_area(P) <= MIN_OPEN_AREA or opacity * 255.0 < 1.0:
         return
+    if image.ndim == 2:
+        image = image[..., None]                     # a view: writes go to the caller's array
     H, W = image.shape[:2]
     x0, y0 = np.maximum(np.floor(P.min(0)).astype(int) - 1, 0)
     x1, y1 = np.minimum(np.ceil(P.max(0)).astype(int) + 2, [W, H])
@@ -71,9 +97,12 @@ def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0
     cv2.fillPoly(mask, np.round((P - [x0, y0]) * (1 << shift)).astype(np.int32)[None], 255, lineType=cv2.LINE_AA,
                  shift=shift)
     a = (mask.astype(np.float32) * (float(opacity) / 255.0))[..., None]
-    col = np.array(tuple(colour)[:3] + (255,) * max(0, image.shape[2] - 3), np.float32)[: image.shape[2]]
+    rgb = np.asarray(tuple(colour)[:3], np.float32)
+    col = np.r_[rgb, np.float32(255)] if image.shape[2] == 4 else rgb if image.shape[2] == 3 else \
+        np.float32([rgb @ np.float32([0.299, 0.587, 0.114])])
     box = image[y0:y1, x0:x1].astype(np.float32)
     image[y0:y1, x0:x1] = np.clip(np.rint(box * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
 
 
-__all__ = ["INNER_LIP_68", "MOUTH_INTERIOR_RGB", "MOUTH_STRIP_68", "mouth_is_cut", "polygon_area", "fill_mouth"]
+__all__ = ["INNER_LIP_68", "MOUTH_INTERIOR_RGB", "MOUTH_STRIP_68", "MIN_OPEN_AREA", "mouth_is_cut", "polygon_area",
+           "opening_opacity", "fill_mouth"]

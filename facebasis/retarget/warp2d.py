@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut
+from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut, opening_opacity
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
 
@@ -336,15 +336,17 @@ class CartoonAnimator:
     def warp(self, cartoon_vertices) -> np.ndarray:
         """The cartoon warped so that ``rest`` moves to ``cartoon_vertices`` (N, 2); (H, W, C) uint8.
 
-        With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67), when open, is drawn as a
-        dark mouth interior (:func:`.mouth2d.fill_mouth`: a closed-mouth painting driven open shows a
-        dark opening, not stretched lips; the target's own teeth are not shown); a capture mesh cut
+        With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67), as it opens beyond the
+        target's own mouth, is drawn as a dark mouth interior (:func:`.mouth2d.fill_mouth` with
+        :func:`.mouth2d.opening_opacity`: a closed-mouth painting driven open shows a dark opening, not
+        stretched lips; the target at rest is left as it is drawn); a capture mesh cut
         open along closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
         (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap."""
         V = np.asarray(cartoon_vertices, np.float64)
         out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
         if self.draws_mouth:
-            fill_mouth(out, V[INNER_LIP_68])
+            mouth = V[INNER_LIP_68]
+            fill_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]))
         return out
 
     def frame_at(self, drive: CartoonDrive, t: int) -> np.ndarray:

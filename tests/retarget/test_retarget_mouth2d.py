@@ -6,7 +6,8 @@ import pytest
 
 from facebasis.capture.facemesh import build_face_mesh
 from facebasis.defaults.cartoon import cartoon_landmarks
-from facebasis.retarget.mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, fill_mouth, mouth_is_cut, polygon_area
+from facebasis.retarget.mouth2d import (INNER_LIP_68, MOUTH_INTERIOR_RGB, fill_mouth, mouth_is_cut, opening_opacity,
+                                        polygon_area)
 from facebasis.retarget.warp2d import CartoonAnimator
 
 SKIN, LIP = (236, 200, 170), (200, 70, 80)
@@ -71,9 +72,10 @@ def test_a_closed_mouth_face_driven_open_shows_a_dark_opening_proportional_to_it
     assert np.all(np.diff(dark) > 0)
 
 
-def test_a_face_drawn_with_an_open_mouth_shows_a_dark_opening_not_its_stretched_teeth():
+def test_a_face_drawn_with_an_open_mouth_keeps_it_at_rest_and_darkens_as_it_opens_wider():
     """The built-in cartoon (teeth drawn between open lips), uncut Delaunay mesh: at rest the frame
-    is the image except inside the lips, which are dark; opened further, the whole opening is dark."""
+    is the image exactly; opened beyond its drawn mouth the opening darkens, fully from twice its area;
+    the same face only scaled (a head coming closer) is not darkened."""
     from scipy.spatial import Delaunay
 
     from facebasis.defaults.cartoon import default_cartoon
@@ -82,10 +84,33 @@ def test_a_face_drawn_with_an_open_mouth_shows_a_dark_opening_not_its_stretched_
     lm = np.array(face.landmarks, float)
     anim = CartoonAnimator(np.array(face.image), lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
     assert not anim.mouth_cut
-    for d in (0.0, 10.0, 20.0):
+    assert np.array_equal(anim.frame(lm), face.image)
+    rest_area = polygon_area(lm[INNER_LIP_68])
+    shares = []
+    for d in (5.0, 10.0, 20.0, 40.0):
         V = _drop(lm, d)
         dark, area, perimeter = _dark_inside(anim.frame(V), V[INNER_LIP_68])
-        assert 0.8 * area <= dark <= area + perimeter + 8
+        shares.append(dark / area)
+        if area >= 2.2 * rest_area:                              # fully opaque from twice the drawn area
+            assert 0.8 * area <= dark <= area + perimeter + 8
+    assert max(shares[:2]) < 0.05 and min(shares[2:]) >= 0.8     # 5 and 10 px: partly blended; 20 and 40: opaque
+    centre = lm[INNER_LIP_68].mean(0)
+    bigger = centre + 1.2 * (lm - centre)
+    opacity = opening_opacity(bigger[INNER_LIP_68], lm[INNER_LIP_68])
+    assert opacity == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_grey_target_gets_a_grey_mouth():
+    img, lm = closed_mouth_face()
+    grey = np.round(img @ [0.299, 0.587, 0.114]).astype(np.uint8)
+    mesh = build_face_mesh(lm)
+    for image in (grey, grey[..., None]):
+        anim = CartoonAnimator(image, lm, lm, mesh.vertices, mesh.faces, fold_free=False)
+        assert np.array_equal(anim.frame(mesh.vertices).reshape(grey.shape), grey)
+        out = anim.frame(_drop(mesh.vertices, 20.0))
+        inside = np.round(anim.mesh(_drop(mesh.vertices, 20.0))[INNER_LIP_68].mean(0)).astype(int)
+        luma = float(np.dot(MOUTH_INTERIOR_RGB, [0.299, 0.587, 0.114]))
+        assert abs(float(out.reshape(out.shape[0], out.shape[1])[inside[1], inside[0]]) - luma) <= 1
 
 
 def test_fill_mouth_blends_only_inside_an_open_polygon():

@@ -25,7 +25,7 @@ framefit   one frame's pose/weight fit with frozen settings (:class:`FrameSolver
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
 observe    which shapes the landmarks can tell apart (:func:`identifiability`)
 calibrate  the person's neutral landmarks estimated from the capture (identity "auto"): an offset,
-           returned, never applied to the solver it is given; the rest face at the first frame when allowed
+           returned, never applied to the solver it is given; the rest face at the take's start when allowed
 onesided   how much a candidate neutral makes a capture's frames demand negative weights (rest-face check)
 reststart  whether a take starts at rest, from its first frames' landmarks (still, lips closed)
 animation  GLB with morph targets and a glTF weight animation

@@ -390,7 +390,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
         extra.update({"identity_rms_px_rig_neutral": cal.rms_before, "identity_rms_px_calibrated": cal.rms_after,
                       "identity_offset_rms_rig_units": moved, "identity_pilot_frames": len(cal.frames)})
         steps = (f"; rest face {'kept' if cal.rest_applied else 'not kept'}"
-                 f"{' (at the first frame)' if cal.rest_anchored else ''}{_START.get(cal.rest_start, '')}, quantile baseline "
+                 f"{' (at the start of the take)' if cal.rest_anchored else ''}{_START.get(cal.rest_start, '')}, quantile baseline "
                  f"{'kept' if cal.quantile_applied else 'not kept'}" if identity == "auto" else "")
         extra.update({"identity_rest_face": bool(cal.rest_applied), "identity_quantile": bool(cal.quantile_applied),
                       "identity_rest_anchor": bool(rest_anchor), "identity_rest_anchored": bool(cal.rest_anchored),

@@ -354,17 +354,21 @@ class RigRetargeter:
                 out.append(fit.rms / fit.s)
         return float(np.median(out)) if out else float("nan")
 
-    def settle(self, landmarks, visible, fps: float = 30.0) -> tuple[FrameSolver, IdentityCalibration | None, float]:
+    def settle(self, landmarks, visible, fps: float = 30.0, finite=None) -> tuple[FrameSolver, IdentityCalibration | None, float]:
         """What a capture's frames are solved with: (the frame solver on the person's neutral and
         with the ridge of the "auto" rule, the identity calibration or None, the noise estimate (nan
         when the ridge was given)). ``landmarks`` (T, L, 2) without NaN, ``visible`` (T, L) bool,
-        ``fps`` (the start window of :func:`.reststart.rest_start`); this retargeter is left as it is."""
+        ``fps`` (the start window of :func:`.reststart.rest_start`), ``finite`` (T, L) bool: the points
+        that had coordinates before NaN was replaced (default all; the others are left out of the start
+        evidence, which keeps a lost point's estimate but cannot use a made-up one); this retargeter
+        is left as it is."""
         model, calibration, noise = self.model, None, float("nan")
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):
             if self.identity == "auto":
-                start = rest_start(landmarks, visible, fps) if self.rest_anchor else None
+                P = landmarks if finite is None else np.where(np.asarray(finite, bool)[..., None], landmarks, np.nan)
+                start = rest_start(P, visible, fps) if self.rest_anchor else None
                 calibration = calibrate_auto(model, landmarks, visible, anchor=self.rest_anchor, start=start)
             else:
                 calibration = calibrate_identity(model, landmarks, visible)
@@ -394,7 +398,7 @@ class RigRetargeter:
         res, nodes = np.zeros(T), np.zeros(T, np.int64)
         state = None
         t0 = time.perf_counter()
-        model, calibration, noise = self.settle(np.nan_to_num(P), vis, fps)
+        model, calibration, noise = self.settle(np.nan_to_num(P), vis, fps, finite=np.isfinite(P).all(axis=2))
         for f in range(T):               # frames in order, each warm-started from the previous one
             fit = model.solve_frame(np.nan_to_num(P[f]), vis[f], state)
             X[f], S[f], Rs[f], Ts[f], res[f], nodes[f] = fit

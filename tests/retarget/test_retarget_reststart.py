@@ -105,6 +105,17 @@ def test_a_take_that_starts_at_rest_is_anchored_and_rests_at_zero(runs):
     assert np.median(res.weights[pause].max(1)) < 0.1                              # and the pauses later on
 
 
+def test_a_missing_point_in_the_start_window_leaves_the_rest_verdict(rig_idx, runs):
+    """A landmark given as NaN on one frame of the start window (a library caller's capture): that
+    frame is left out of the evidence instead of entering it as a point at (0, 0)."""
+    rig, idx = rig_idx
+    X, pause, _ = runs["rest"]
+    P = capture(rig, idx, X).landmarks.copy()
+    P[5, 3] = np.nan
+    cal = RigRetargeter(rig, idx).run(P, fps=FPS).calibration
+    assert cal.rest_start is True and cal.rest_anchored
+
+
 def test_a_take_that_starts_with_the_mouth_open_keeps_its_jaw_open(rig_idx, runs):
     rig, _ = rig_idx
     X, pause, res = runs["open"]

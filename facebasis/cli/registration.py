@@ -21,6 +21,9 @@ def cmd_register(args) -> int:
     if args.detector is not None and lm != ["auto"]:
         raise InputError(f"--detector {args.detector}: expected together with --landmarks auto, found "
                          f"{'no --landmarks' if lm is None else '--landmarks with files'}")
+    if args.identity_prior == "noise" and args.detail_prior == "off":   # the prior applies to the joint fit only
+        raise InputError("--identity-prior noise: expected together with --detail-prior on (the noise-level prior "
+                         "continues the fit of the modes and the detail field), found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 

@@ -156,6 +156,16 @@ def test_cli_identity_prior_reaches_the_registration(tmp_path, monkeypatch, give
     assert DetailPriorOptions().noise_prior is True  # the CLI's default is the library's
 
 
+def test_cli_identity_prior_noise_without_the_detail_prior_is_refused(tmp_path, capsys):
+    """The noise-level prior continues the joint fit; with the detail prior off it would be dropped silently."""
+    out = tmp_path / "o"
+    assert main(["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out),
+                 "--detail-prior", "off", "--identity-prior", "noise"]) == 2
+    err = capsys.readouterr().err
+    assert "--identity-prior noise: expected together with --detail-prior on" in err and "found --detail-prior off" in err
+    assert err.count("\n") == 1 and not out.exists()
+
+
 def test_cli_detail_prior_on_and_off_register_through_the_identity_basis(tmp_path, capsys):
     import json
 

@@ -127,7 +127,8 @@ class FaceTracker:
         self._lost_prev = np.zeros(L, bool)
         self._lm0, self._width = lm.copy(), face_width(lm)
         self._W = neighbour_weights(lm, options.filter.neighbour_sigma * face_width(lm))   # LK-failure prediction
-        self._drift = DriftTemplates(gray, lm, self.windows, self._inner, options.drift_blur * self.scale,
+        dense = lip_partners(L)[0]                      # inner lips: a thin lip line, in every inner_lips mode
+        self._drift = DriftTemplates(gray, lm, self.windows, dense, options.drift_blur * self.scale,
                                      self.windows.max() + 8.0 * self.scale, DRIFT_SAMPLES, DRIFT_SAMPLES_DENSE)
         self._V = self.mesh.vertices.copy()
         self._affine = local_affine_factor(self.mesh.vertices, np.arange(L), self.mesh.spacing)   # frame 0's part

@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from facebasis.retarget.reststart import align_similarity
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: variant name -> RigRetargeter keyword arguments (``default`` = the command's defaults)
@@ -48,24 +50,6 @@ VARIANTS = {
 CALM_TOL = 0.015
 
 
-def similarity_align(P, ref):
-    """Similarity (scale, rotation, translation) of each frame's landmarks onto ``ref``.
-
-    P : (T, L, 2); ref : (L, 2). Returns the aligned landmarks (T, L, 2) (Umeyama, closed form)."""
-    P = np.asarray(P, np.float64)
-    ref = np.asarray(ref, np.float64)
-    mp = P.mean(1, keepdims=True)
-    mr = ref.mean(0)
-    A = P - mp
-    B = ref - mr
-    # complex-number form of the 2D similarity: z_ref ~ a z_p with a complex
-    za = A[..., 0] + 1j * A[..., 1]
-    zb = B[:, 0] + 1j * B[:, 1]
-    a = (np.conj(za) * zb[None]).sum(1) / np.maximum((np.abs(za) ** 2).sum(1), 1e-300)
-    z = a[:, None] * za + (mr[0] + 1j * mr[1])
-    return np.stack([z.real, z.imag], -1)
-
-
 def face_width(p) -> float:
     """Jaw-contour width |p0 - p16| of one frame's 68 landmarks."""
     return float(np.linalg.norm(np.asarray(p)[0] - np.asarray(p)[16]))
@@ -75,7 +59,7 @@ def calm_frames(landmarks, tol: float = CALM_TOL) -> np.ndarray:
     """(T,) bool: frames whose landmarks, similarity-aligned onto frame 0, lie within ``tol`` times
     frame 0's face width of their frame-0 positions (rms over the landmarks) (the face at rest, as in frame 0)."""
     P = np.asarray(landmarks, np.float64)
-    A = similarity_align(P, P[0])
+    A = align_similarity(P, P[0])
     d = np.sqrt(np.mean(np.sum((A - P[0][None]) ** 2, axis=2), axis=1))
     return d <= tol * face_width(P[0])
 

@@ -216,6 +216,15 @@ RECIPES: tuple[Recipe, ...] = (
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
             "--after-model normal --regions 12 --noise-prior off --out reports/registration/noise_prior_off",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions24", "24 expression regions (the default since issue #27's jawOpen p95: 12 "
+           "regions could not follow the person's strength field at the chin and lips), seed 0 both persons, seed 1 "
+           "in-space; baseline: registration-rig-noise-prior (12 regions, same code otherwise)",
+           tuple(f"registration/regions24_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons in-space detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/regions24_seed0",
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/regions24_seed1"),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

@@ -34,7 +34,7 @@ def cmd_register(args) -> int:
 
     opts = RegistrationOptions(after_model=args.after_model or "normal",
                                expression_regions=RegionOptions(
-                                   count=12 if args.expression_regions is None else args.expression_regions),
+                                   count=RegionOptions.count if args.expression_regions is None else args.expression_regions),
                                detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes,
                                                          noise_prior=args.identity_prior != "fixed"))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
@@ -73,7 +73,7 @@ def register(subparsers) -> None:
     p.add_argument("--expression-regions", default=None, type=int, action=Once, metavar="N",
                    help="after the expression fit, one weight per expression in each of N soft regions placed over "
                         "the expressions' supports (a person's expression whose strength varies over the face, e.g. "
-                        "a jaw opening further on one side); default 12; 0: whole expressions only")
+                        "a jaw opening further on one side); default 24; 0: whole expressions only")
     p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
                    help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
                         "what the identity space cannot express is left to that field instead of sliding the "

@@ -48,9 +48,15 @@ class RegionOptions:
 
     Attributes
     ----------
-    count : number of soft regions (default 12); 0: whole expressions only, no regional stage. ICT persons
+    count : number of soft regions (default 24); 0: whole expressions only, no regional stage. ICT persons
         of ``problems.bench_registration_rig`` (reports/registration/regions*): every scan's p95 <= 0.18 cm
-        with 12 (0.235-0.237 with whole expressions), held-out ratio unchanged, about 1 s CPU more per scan
+        with 12 (0.235-0.237 with whole expressions), held-out ratio unchanged, about 1 s CPU more per scan.
+        24 (reports/registration/regions24_seed*): a person's expression strength varies at a finer scale
+        than 12 regions resolve (the ICT persons' jawOpen: the worst 5 % of its face vertices 0.24 cm off
+        *along* the skin at the chin and lips after the regional fit, which no later stage sees; from the
+        person's exact neutral still p95 0.146 cm), so the p95 of jawOpen was 0.13-0.18 cm depending on
+        the neutral (seed 0: 0.134 with the fixed identity prior, 0.176 with the noise-level one):
+        with 24, 0.094 cm; about 1-4 s CPU more per expression scan than 12
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex
@@ -59,7 +65,7 @@ class RegionOptions:
     fit : the closest-point / Gauss-Newton loop's options (prior ``mu``, iterations, ...)
     """
 
-    count: int = 12
+    count: int = 24
     width: float = 0.6
     support: float = 0.05
     active: float = 0.02

@@ -180,9 +180,11 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     A : ndarray, shape (L, 2, 2)
         Final linear part.
     """
-    from .particle import sample
+    import cv2
 
-    img, gx, gy = prep
+    from .particle import sample_channels
+
+    img3 = cv2.merge(list(prep))                            # image and gradients: one remap per sample
     L = len(template)
     r2 = (offsets ** 2 / np.maximum((offsets ** 2).max(1, keepdims=True), 1e-12)).sum(-1)
     w = np.exp(-r2)                                         # (L, S) Gaussian window
@@ -193,8 +195,8 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     npar = 6 if affine else 2
     for _ in range(iterations):
         X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
-        I = sample(img, X)
-        G = np.stack([sample(gx, X), sample(gy, X)], -1)    # (L, S, 2)
+        IG = sample_channels(img3, X)                       # (L, S, 3)
+        I, G = IG[..., 0], IG[..., 1:]                      # G: (L, S, 2)
         if affine:   # d X / d A_ab = e_a o_b
             J = np.concatenate([G, G[..., :1] * offsets, G[..., 1:] * offsets], -1)   # (L, S, 6)
         else:
@@ -219,7 +221,7 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
         if float(step.max()) < 1e-2:
             break
     X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
-    I = sample(img, X)
+    I = sample_channels(img3, X)[..., 0]
     I = I - (w * I).sum(1, keepdims=True)
     zn = (w * I * T).sum(1) / np.sqrt((w * I * I).sum(1) * (w * T * T).sum(1) + 1e-12)
     return p, zn, A

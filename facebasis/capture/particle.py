@@ -86,8 +86,7 @@ def patch_offsets(radius: int) -> np.ndarray:
     return np.stack([gx.ravel(), gy.ravel()], 1)
 
 
-def sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Bilinear samples of a float32 image at points ``(..., 2)`` -> ``(...)`` (border replicated)."""
+def _remap_points(img: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     import cv2
 
     shape = pts.shape[:-1]
@@ -97,8 +96,21 @@ def sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
     pad = (-n) % cols
     xy = np.zeros((n + pad, 2), np.float32)      # one interleaved CV_32FC2 map: no x / y split copies
     xy[:n] = flat
-    out = cv2.remap(img, xy.reshape(-1, cols, 2), None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.remap(img, xy.reshape(-1, cols, 2), None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), n, shape
+
+
+def sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Bilinear samples of a float32 image at points ``(..., 2)`` -> ``(...)`` (border replicated)."""
+    out, n, shape = _remap_points(img, pts)
     return out.ravel()[:n].reshape(shape)
+
+
+def sample_channels(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Bilinear samples of a float32 image of C channels (H, W, C) at points ``(..., 2)`` -> ``(..., C)``
+    (one remap for all channels; the same values as :func:`sample` on each channel)."""
+    out, n, shape = _remap_points(img, pts)
+    C = img.shape[2]
+    return out.reshape(-1, C)[:n].reshape(shape + (C,))
 
 
 def _normalise(p: np.ndarray) -> np.ndarray:

@@ -156,3 +156,20 @@ def test_local_affine_and_template_align_recover_a_known_warp():
     gy = cv2.Sobel(img1, cv2.CV_32F, 0, 1, ksize=3, scale=1 / 8)
     p, zn, _ = template_align(T, off, (img1, gx, gy), truth + [0.7, -0.7], A[:2], iterations=8)
     assert np.abs(p - truth).max() < 0.05 and zn.min() > 0.99
+
+
+def test_sample_channels_is_sample_on_each_channel():
+    """One remap for an image and its gradients gives the values of three single-channel samples,
+    bilinear between pixels (a linear ramp is sampled exactly) and replicated past the border."""
+    from facebasis.capture.particle import sample, sample_channels
+
+    rng = np.random.default_rng(0)
+    chans = [rng.random((40, 50)).astype(np.float32) for _ in range(3)]
+    chans[0] = np.add.outer(np.zeros(40), np.arange(50.0)).astype(np.float32)      # I(x, y) = x
+    pts = np.concatenate([rng.uniform(0, 49, (7, 1500, 2)), np.full((7, 3, 2), -5.0)], axis=1)
+    got = sample_channels(np.dstack(chans), pts)
+    assert got.shape == (7, 1503, 3)
+    for c in range(3):
+        np.testing.assert_array_equal(got[..., c], sample(chans[c], pts))
+    np.testing.assert_allclose(got[:, :1500, 0], pts[:, :1500, 0], atol=2e-3)
+    assert np.all(got[:, 1500:, 0] == 0.0)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .common import Once
 from .outputs import Outputs
 
 DESCRIPTION = """\
@@ -59,6 +60,11 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "frame's lip thickness (renewed from the detections with --detector), since closed lips "
                         "put an upper and a lower point on one patch that LK cannot split; 'track' tracks the "
                         "lip line itself (the mouth may not open)")
+    p.add_argument("--drift-blur", default=None, action=Once, metavar="PX",
+                   help="blur (pixels for a 150 px wide face, scaled with the face) of the image the drift "
+                        "correction aligns first-frame patches on; default 0.5: sharp enough that patches do not "
+                        "slide along lip lines and eyelids on clean footage; strongly compressed webcam video may "
+                        "track better with more (1.5 was the former value)")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     p.set_defaults(func=cmd_capture, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("input", "landmarks")))
     register_landmarks(subparsers)
@@ -82,6 +88,14 @@ def cmd_capture(args) -> int:
 
     if args.inner_lips not in INNER_LIPS:
         raise InputError(f"--inner-lips: expected one of {', '.join(INNER_LIPS)}, found {args.inner_lips!r}")
+    drift_blur = TrackerOptions.drift_blur
+    if args.drift_blur is not None:
+        try:
+            drift_blur = float(args.drift_blur)
+        except ValueError:
+            drift_blur = float("nan")
+        if not (drift_blur >= 0 and drift_blur != float("inf")):
+            raise InputError(f"--drift-blur: expected a number of pixels >= 0, found {args.drift_blur!r}")
     max_frames = (None if args.max_frames is None
                   else _int_option(args.max_frames, "--max-frames", 1, "a positive integer"))
     src, lm, det = check_capture_args(args.input, args.landmarks, args.detector, args.out, max_frames, args.fps)
@@ -97,7 +111,7 @@ def cmd_capture(args) -> int:
             warnings.simplefilter("always", VideoWarning)
             res = capture(src, landmarks=lm, detector=det, out=args.out, max_frames=max_frames,
                           overlay=not args.no_overlay, progress=progress,
-                          options=TrackerOptions(inner_lips=args.inner_lips))
+                          options=TrackerOptions(inner_lips=args.inner_lips, drift_blur=drift_blur))
     finally:
         if bar is not None:
             bar.close()

@@ -136,3 +136,38 @@ def test_auto_tracks_inner_lips_seen_again_on_a_photograph():
         L = _run(astro, TrackerOptions(refine_mesh=False, inner_lips=mode))
         err[mode] = np.linalg.norm(L[:, inner] - astro.landmarks[:, inner], axis=-1).mean()
     assert err["auto"] < 0.95 * err["follow"]
+
+
+def test_cli_drift_blur_bad_values_repeat_and_default(tmp_path, capsys, monkeypatch):
+    """--drift-blur: bad values are one line naming the option before any work, given twice is refused,
+    a good value reaches TrackerOptions, and without it the library's default applies."""
+    import facebasis.capture.tracker as tracker
+    from facebasis.capture.landmarks import format_pts
+    from facebasis.capture.options import TrackerOptions
+    from facebasis.cli import main
+
+    from conftest import parser_refuses
+
+    seq = synthetic_sequence(3, size=(96, 96))
+    import cv2
+
+    d = tmp_path / "frames"
+    d.mkdir()
+    for i, f in enumerate(seq.frames):
+        cv2.imwrite(str(d / f"f{i:03d}.png"), f[..., ::-1])
+    (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))
+    base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
+    for bad in ("-0.5", "nan", "inf", "soft"):
+        out = tmp_path / f"bad{bad}"
+        assert main([*base, "--out", str(out), "--drift-blur", bad]) == 2
+        err = capsys.readouterr().err
+        assert f"--drift-blur: expected a number of pixels >= 0, found '{bad}'" in err and err.count("\n") == 1
+        assert not out.exists()
+    parser_refuses(main, [*base, "--out", str(tmp_path / "twice"), "--drift-blur", "1", "--drift-blur", "2"], capsys,
+                   "--drift-blur")
+    seen = []
+    real = tracker.capture
+    monkeypatch.setattr(tracker, "capture", lambda *a, **k: seen.append(k["options"].drift_blur) or real(*a, **k))
+    assert main([*base, "--out", str(tmp_path / "o1"), "--drift-blur", "1.5"]) == 0
+    assert main([*base, "--out", str(tmp_path / "o2")]) == 0
+    assert seen == [1.5, TrackerOptions().drift_blur]

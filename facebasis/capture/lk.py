@@ -163,8 +163,9 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
         Frame-0 samples at ``p0 + offsets`` (blurred image).
     offsets : ndarray, shape (L, S, 2)
         Sample offsets (:func:`patch_grid`).
-    prep : tuple
-        ``(image, gx, gy)`` of the new frame (:func:`facebasis.capture.meshtrack.prepare_image`).
+    prep : ndarray, shape (H, W, 3) float32
+        The new frame's blurred image and its x, y gradients stacked (:func:`drift_image`), so that one
+        remap samples all three.
     guess : ndarray, shape (L, 2)
     A : ndarray, shape (L, 2, 2)
     iterations : int
@@ -180,11 +181,8 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     A : ndarray, shape (L, 2, 2)
         Final linear part.
     """
-    import cv2
-
     from .particle import sample_channels
 
-    img3 = cv2.merge(list(prep))                            # image and gradients: one remap per sample
     L = len(template)
     r2 = (offsets ** 2 / np.maximum((offsets ** 2).max(1, keepdims=True), 1e-12)).sum(-1)
     w = np.exp(-r2)                                         # (L, S) Gaussian window
@@ -195,7 +193,7 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
     npar = 6 if affine else 2
     for _ in range(iterations):
         X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
-        IG = sample_channels(img3, X)                       # (L, S, 3)
+        IG = sample_channels(prep, X)                       # (L, S, 3)
         I, G = IG[..., 0], IG[..., 1:]                      # G: (L, S, 2)
         if affine:   # d X / d A_ab = e_a o_b
             J = np.concatenate([G, G[..., :1] * offsets, G[..., 1:] * offsets], -1)   # (L, S, 6)
@@ -221,7 +219,7 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
         if float(step.max()) < 1e-2:
             break
     X = p[:, None, :] + offsets @ A.transpose(0, 2, 1)
-    I = sample_channels(img3, X)[..., 0]
+    I = sample_channels(prep, X)[..., 0]
     I = I - (w * I).sum(1, keepdims=True)
     zn = (w * I * T).sum(1) / np.sqrt((w * I * I).sum(1) * (w * T * T).sum(1) + 1e-12)
     return p, zn, A
@@ -229,18 +227,21 @@ def template_align(template: np.ndarray, offsets: np.ndarray, prep, guess: np.nd
 
 def drift_image(gray: np.ndarray, points: np.ndarray, sigma: float, margin: float):
     """Blurred image and gradients (:func:`facebasis.capture.meshtrack.prepare_image`) of the box around
-    ``points (L, 2)`` widened by ``margin`` pixels (the part the drift correction samples), and the
-    box's top-left corner ``(2,)``: points in it are ``points - corner``."""
+    ``points (L, 2)`` widened by ``margin`` pixels (the part the drift correction samples), stacked
+    (h, w, 3) float32, and the box's top-left corner ``(2,)``: points in it are ``points - corner``."""
+    import cv2
+
     from .meshtrack import prepare_image
 
     h, w = gray.shape
     pts = np.asarray(points, float)
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     if not len(pts):
-        return prepare_image(gray, sigma), np.zeros(2)
+        return cv2.merge(list(prepare_image(gray, sigma))), np.zeros(2)
     x0, y0 = np.clip(np.floor(pts.min(0) - margin).astype(int), 0, [w - 1, h - 1])
     x1, y1 = np.clip(np.ceil(pts.max(0) + margin).astype(int) + 1, [x0 + 1, y0 + 1], [w, h])
-    return prepare_image(np.ascontiguousarray(gray[y0:y1, x0:x1]), sigma), np.array([x0, y0], float)
+    box = prepare_image(np.ascontiguousarray(gray[y0:y1, x0:x1]), sigma)
+    return cv2.merge(list(box)), np.array([x0, y0], float)
 
 
 class DriftTemplates:
@@ -276,7 +277,8 @@ class DriftTemplates:
         from .particle import sample
 
         self.sigma, self.margin = float(sigma), float(margin)
-        (image, _, _), o = drift_image(gray, points, self.sigma, self.margin)
+        stacked, o = drift_image(gray, points, self.sigma, self.margin)
+        image = np.ascontiguousarray(stacked[..., 0])
         is_dense = np.zeros(len(points), bool)
         is_dense[np.asarray(dense, np.int64)] = True
         self.groups = []

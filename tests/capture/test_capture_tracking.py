@@ -154,7 +154,7 @@ def test_local_affine_and_template_align_recover_a_known_warp():
     T = sample(img0, pts0[:, None, :] + off)
     gx = cv2.Sobel(img1, cv2.CV_32F, 1, 0, ksize=3, scale=1 / 8)
     gy = cv2.Sobel(img1, cv2.CV_32F, 0, 1, ksize=3, scale=1 / 8)
-    p, zn, _ = template_align(T, off, (img1, gx, gy), truth + [0.7, -0.7], A[:2], iterations=8)
+    p, zn, _ = template_align(T, off, np.dstack([img1, gx, gy]).astype(np.float32), truth + [0.7, -0.7], A[:2], iterations=8)
     assert np.abs(p - truth).max() < 0.05 and zn.min() > 0.99
 
 

@@ -214,11 +214,11 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     from .normalstage import normal_displacement
 
     opts = reg.options.detail
+    if opts.modes == 0:
+        return plain
     fo = reg.options.identity_fit
     if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves
         fo = dataclasses.replace(fo, prior=noise_prior(plain, h, fo.prior), prior_start=None)
-    if opts.modes == 0:
-        return plain
     out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
                               reg.options.normal_stage, use=reg.skin)
     part = slice(None) if reg.skin is None else reg.skin

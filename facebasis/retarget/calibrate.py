@@ -195,7 +195,7 @@ def calibrate_identity(solver: FrameSolver, landmarks, visible, n_frames: int = 
         Qf = pilot.v0[None] + np.einsum("lck,fk->flc", pilot.D, X)             # fitted shapes (F, L, 3)
         fit = (S[:, None, None] * np.einsum("fij,flj->fli", np.einsum("ij,fjk->fik", PI, Rs), Qf)
                + Ts[:, None])
-        off = back_project(P[frames] - fit, S, Rs)                             # (F, L, 3)
+        off = back_project(np.array([o.flat for o in out]) - fit, S, Rs)       # (F, L, 3), as the model saw them
         off[~vis[frames] | ~good[:, None]] = np.nan
         o = np.nan_to_num(np.nanmedian(off, axis=0))[:, :2].reshape(-1)        # (2L,) robust
         o = o - Q @ (Q.T @ o)
@@ -221,14 +221,16 @@ def first_frame_offset(solver: FrameSolver, p, visible) -> np.ndarray:
     it turns away (tested: weight error 0.04 instead of 0.24 under +-5 degrees).
     """
     from ..errors import InputError
-
     vis = np.asarray(visible, bool)
     if vis.sum() < 4:
         raise InputError("first-frame neutral: expected at least 4 visible landmarks on frame 0")
     v0 = solver.v0
     s, R, t = fit_pose_affine(v0[vis], p[vis])
-    s, R, t, _ = fit_pose_gn(v0[vis], p[vis], s, R, t, iterations=10)
-    r = np.where(vis[:, None], p - (s * (v0 @ R.T @ PI.T) + t), 0.0)
+    pf = p
+    for _ in range(1 if np.isinf(solver.focal) else 3):            # the landmarks as the model sees them
+        s, R, t, _ = fit_pose_gn(v0[vis], pf[vis], s, R, t, iterations=10)
+        pf = solver.flatten(p, v0, s, R)
+    r = np.where(vis[:, None], pf - (s * (v0 @ R.T @ PI.T) + t), 0.0)
     return (r @ PI @ R) / s
 
 
@@ -271,9 +273,12 @@ def rest_offsets(solver, landmarks, visible, frames, poses=None):
         W = contour_weights(P[f], solver.contour, solver.contour_slide)
         W = None if W is None else W[v]
         s, R, t = fit_pose_affine(solver.v0[v], P[f][v]) if poses is None else poses[j]
-        s, R, t, rms[j] = fit_pose_gn(solver.v0[v], P[f][v], s, R, t, iterations=4, sqrtw=W)
+        pf = P[f]
+        for _ in range(1 if np.isinf(solver.focal) else 2):          # the landmarks as the model sees them
+            s, R, t, rms[j] = fit_pose_gn(solver.v0[v], pf[v], s, R, t, iterations=4, sqrtw=W)
+            pf = solver.flatten(P[f], solver.v0, s, R)
         new_poses.append((s, R, t))
-        o = ((P[f] - (s * (solver.v0 @ R.T @ PI.T) + t)) @ PI @ R) / s
+        o = ((pf - (s * (solver.v0 @ R.T @ PI.T) + t)) @ PI @ R) / s
         out[j, v] = o[v]
     return out, new_poses, rms
 
@@ -440,7 +445,6 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True,
     return replace(common, demand_ratio=ratio)
 
 
-__all__ = ["IdentityCalibration", "calibrate_auto", "ANCHOR_DEMAND_MAX", "calibrate_identity",
-           "calibrate_rest", "first_frame_offset", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES",
-           "pilot_frames", "back_project", "CALIBRATION_FRAMES", "CALIBRATION_ROUNDS", "BASELINE_QUANTILE",
-           "MIN_GAIN", "OUTLIER"]
+__all__ = ["IdentityCalibration", "calibrate_auto", "ANCHOR_DEMAND_MAX", "calibrate_identity", "calibrate_rest",
+           "first_frame_offset", "rest_offsets", "densest_frames", "REST_SHARE", "REST_FRAMES", "pilot_frames",
+           "back_project", "CALIBRATION_FRAMES", "CALIBRATION_ROUNDS", "BASELINE_QUANTILE", "MIN_GAIN", "OUTLIER"]

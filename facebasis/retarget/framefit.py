@@ -14,18 +14,39 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from .pose import PI, contour_weights, fit_pose_affine, fit_pose_gn, pose_jacobian, whiten
 
 #: smallest ridge of the "auto" rule (and the pilot fit's ridge): noise-free captures are solved with it
 RIDGE_FLOOR = 1e-3
 
 
+def _number(name, value, expected):
+    try:
+        return np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        raise parameter_error(name, expected, repr(value)) from None
+
+
+def check_camera(focal, centre) -> tuple[float, np.ndarray | None]:
+    """The camera of :class:`FrameSolver` checked: (focal length px, inf for None; principal point
+    (2,) px or None). A bad value is one :class:`InputError` naming the parameter."""
+    f = float("inf") if focal is None else _number("focal", focal, "a focal length in pixels > 0")
+    if focal is not None and not (np.ndim(f) == 0 and np.isfinite(f) and f > 0):
+        raise parameter_error("focal", "a focal length in pixels > 0", repr(focal))
+    c = None if centre is None else _number("centre", centre, "two pixel coordinates (x, y)")
+    if c is not None and (c.shape != (2,) or not np.isfinite(c).all()):
+        raise parameter_error("centre", "two finite pixel coordinates (x, y)", repr(centre))
+    return float(f), c
+
+
 @dataclass(frozen=True)
 class FrameFit:
     """One frame's fit (:meth:`FrameSolver.solve_frame`): weights x (k,), scale s (px per rig
     unit), rotation R (3, 3), translation t (2,) px, rms landmark residual px (visible landmarks;
-    nan when too few were visible), branch-and-bound nodes. Unpacks as the former 6-tuple
+    nan when too few were visible), branch-and-bound nodes, and ``flat`` (L, 2): the landmarks as
+    the weak-perspective model saw them (:meth:`FrameSolver.flatten` at the fitted pose; the
+    landmarks themselves without a focal length). Unpacks as the former 6-tuple
     ``x, s, R, t, rms, nodes``."""
 
     x: np.ndarray
@@ -34,6 +55,8 @@ class FrameFit:
     t: np.ndarray
     rms: float
     nodes: int
+    flat: np.ndarray | None = None
+
 
     @property
     def state(self) -> tuple:
@@ -57,6 +80,8 @@ class FrameSolver:
     contour : (c,) int64 landmark indices of a sliding contour; contour_slide its along-contour weight
     alternations, tol : pose/weight rounds of a warm-started frame and the weight change that ends them
     ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
+    focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
+        centre (2,) its principal point, px (see :meth:`flatten`)
     """
 
     v0: np.ndarray
@@ -70,6 +95,8 @@ class FrameSolver:
     alternations: int
     tol: float
     ipopt: object = None
+    focal: float = float("inf")
+    centre: np.ndarray | None = None
 
     @property
     def n_shapes(self) -> int:
@@ -90,6 +117,25 @@ class FrameSolver:
         keeps the contour's sliding, to compare fits as the frames will be solved)."""
         return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0,
                        contour_slide=1.0 if plain else self.contour_slide)
+
+    def flatten(self, p, q, s, R) -> np.ndarray:
+        """Landmarks p (L, 2) as a weak-perspective camera would see the rig points q (L, 3) at the
+        pose (s, R): ``c + (p - c) (1 - s z_l / f)``, z_l = (R q_l)_z the depth of a point towards the
+        camera from the rig's origin (at distance f / s).
+
+        A pinhole camera of focal f (px) and principal point c sees a point at depth z_l in front of
+        the origin magnified by ``Z / (Z - z_l)`` about c relative to the weak-perspective image
+        ``s Pi R q + t`` (s = f / Z); dividing that factor out (the scaled-orthographic iteration of
+        POSIT, DeMenthon & Davis 1995, with the pose and the weights of the current estimate) lets
+        the weak-perspective fit see a face that comes closer as a larger face, not as a face whose
+        nose and brows grow against its jaw line (measured on cap12: the jaw width over the eye
+        distance follows the scale at r = -0.89, read as browDown/jawLeft). ``focal`` inf: p itself.
+        """
+        if not np.isfinite(self.focal):
+            return p
+        z = np.asarray(q, np.float64) @ np.asarray(R)[2]                     # (L,) towards the camera
+        g = np.maximum(1.0 - s * z / self.focal, 0.1)                        # a point never behind the camera
+        return self.centre + (np.asarray(p, np.float64) - self.centre) * g[:, None]
 
     def landmarks3d(self, x) -> np.ndarray:
         """Rig landmark positions (L, 3) at weights x (k,)."""
@@ -144,15 +190,19 @@ class FrameSolver:
             n_alt = self.alternations
         W = contour_weights(p, self.contour, self.contour_slide)
         W = None if W is None else W[vis]
-        x, nodes = x_prev.copy(), 0
+        x, nodes, pf = x_prev.copy(), 0, p
         for _ in range(n_alt):
-            s, R, t, _ = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
+            q = self.landmarks3d(x)
+            pf = self.flatten(p, q, s, R)
+            s, R, t, _ = fit_pose_gn(q[vis], pf[vis], s, R, t, iterations=3, sqrtw=W)
             x_old = x
-            x, nodes = self._weights(p, vis, s, R, t, x_prev, x, W)
+            x, nodes = self._weights(pf, vis, s, R, t, x_prev, x, W)
             if np.abs(x - x_old).max() <= self.tol:
                 break
-        s, R, t, rms = fit_pose_gn(self.landmarks3d(x)[vis], p[vis], s, R, t, iterations=3, sqrtw=W)
-        return FrameFit(x, float(s), R, t, float(rms), int(nodes))
+        q = self.landmarks3d(x)
+        pf = self.flatten(p, q, s, R)
+        s, R, t, rms = fit_pose_gn(q[vis], pf[vis], s, R, t, iterations=3, sqrtw=W)
+        return FrameFit(x, float(s), R, t, float(rms), int(nodes), pf)
 
 
-__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR"]
+__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera"]

@@ -67,7 +67,7 @@ import numpy as np
 from ..errors import InputError, named_params, parameter_error
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
-from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver
+from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .reststart import rest_start
 from .pose import (
@@ -250,13 +250,18 @@ class RigRetargeter:
         other layouts: the first frame's posture recurs) and it is one-sided enough
         (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps the capture's commonest
         posture (the default before it)
+    focal : the camera's focal length in pixels (None, the default: a weak-perspective camera);
+        ``centre`` its principal point (2,) px (None: the capture's median landmark position). Given,
+        every fit sees the landmarks with the perspective of the current estimate divided out
+        (:meth:`.framefit.FrameSolver.flatten`): a face that comes closer is not read as an expression
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
                  alternations: int = 2, solver: str = "certified", tol: float = 1e-4,
                  first_frame_neutral: bool | None = None, identity: str | None = None,
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
-                 sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True):
+                 sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True,
+                 focal: float | None = None, centre=None):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -295,6 +300,7 @@ class RigRetargeter:
             raise parameter_error("rest_anchor", "True or False", repr(rest_anchor))
         self.rest_anchor = bool(rest_anchor)
         self.sparsity = float(sparsity)
+        focal, centre = check_camera(focal, centre)
         ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -307,7 +313,7 @@ class RigRetargeter:
             D=np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0)),    # (L, 3, k)
             pairs=self.pairs, smooth=self.smooth, ridge=self.ridge, sparsity=self.sparsity,
             contour=self.contour, contour_slide=self.contour_slide, alternations=self.alternations,
-            tol=self.tol, ipopt=ipopt)
+            tol=self.tol, ipopt=ipopt, focal=focal, centre=centre)
 
     @property
     def n_landmarks(self) -> int:
@@ -363,6 +369,8 @@ class RigRetargeter:
         evidence, which keeps a lost point's estimate but cannot use a made-up one); this retargeter
         is left as it is."""
         model, calibration, noise = self.model, None, float("nan")
+        if np.isfinite(model.focal) and model.centre is None:     # the principal point: where the face is
+            model = replace(model, centre=np.median(landmarks[np.asarray(visible, bool)], axis=0))
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):

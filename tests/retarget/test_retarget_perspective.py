@@ -1,0 +1,91 @@
+"""A face at rest whose head pitches and moves away from a pinhole camera (issue 23, target 3): the
+perspective that a weak-perspective fit reads as expression, divided out with the camera's focal length
+(:meth:`facebasis.retarget.framefit.FrameSolver.flatten`, ``RigRetargeter(focal=...)``)."""
+
+import numpy as np
+import pytest
+from test_retarget_restface import own_face
+
+from facebasis.defaults.face import default_template
+from facebasis.defaults.face_landmarks import face_landmarks
+from facebasis.errors import InputError
+from facebasis.retarget.framefit import FrameSolver, check_camera
+from facebasis.retarget.pose import PI, rotation_from_vector
+from facebasis.retarget.rigdrive import RigRetargeter
+
+FPS = 25.0
+CENTRE = np.array([200.0, 150.0])
+
+
+def pinhole(Q, R, s, focal, offset):
+    """Rig points Q (T, L, 3) seen by a pinhole camera of focal ``focal`` px at the principal point
+    CENTRE: rotation R (T, 3, 3), the rig origin at distance focal / s (T,) and in-plane position
+    ``offset`` (T, 2) rig units (right, up). Returns (T, L, 2) px."""
+    q = np.einsum("tij,tlj->tli", R, Q)
+    Z = focal / s
+    d = Z[:, None] - q[..., 2]                               # depth of every point from the camera
+    x = offset[:, None, 0] + q[..., 0]
+    y = offset[:, None, 1] + q[..., 1]
+    return np.stack([CENTRE[0] + focal * x / d, CENTRE[1] - focal * y / d], -1)
+
+
+def test_flatten_turns_a_pinhole_image_into_the_weak_perspective_one():
+    rng = np.random.default_rng(0)
+    q = rng.normal(scale=4.0, size=(1, 30, 3))
+    R = rotation_from_vector([0.2, -0.3, 0.1])[None]
+    s, focal, off = np.array([6.0]), 300.0, np.array([[1.5, -2.0]])
+    p = pinhole(q, R, s, focal, off)[0]
+    weak = s[0] * q[0] @ R[0].T @ PI.T + CENTRE + s[0] * off[0] * [1, -1]
+    solver = FrameSolver(q[0], np.zeros((30, 3, 1)), np.zeros((0, 2), np.int64), 0.05, 1e-3, 0.0, np.zeros(0, np.int64),
+                         1.0, 2, 1e-4, focal=focal, centre=CENTRE)
+    assert np.abs(solver.flatten(p, q[0], s[0], R[0]) - weak).max() < 1e-9
+    assert np.abs(p - weak).max() > 1.0                      # the perspective is there to divide out
+    assert solver.flatten(p, q[0], s[0], R[0]) is not p
+    assert FrameSolver(q[0], np.zeros((30, 3, 1)), np.zeros((0, 2), np.int64), 0.05, 1e-3, 0.0,
+                       np.zeros(0, np.int64), 1.0, 2, 1e-4).flatten(p, q[0], s[0], R[0]) is p   # weak camera
+
+
+@pytest.fixture(scope="module")
+def at_rest_moving_head():
+    """The built-in face with a face shape of its own, at rest for 6 s while the head pitches +-8
+    degrees, turns +-4 and moves away from a 250 px camera (7 -> 5.3 px per rig unit, 36 -> 47 cm:
+    cap12's last 20 s), 0.2 px noise."""
+    rig, idx = default_template(), face_landmarks()
+    T = 150
+    t = np.arange(T) / FPS
+    Q = np.repeat(own_face(rig, idx)[idx][None], T, 0)
+    R = np.stack([rotation_from_vector([np.deg2rad(8.0) * np.sin(2 * np.pi * u / 3.0),
+                                        np.deg2rad(4.0) * np.sin(2 * np.pi * u / 2.5 + 1.0), 0.0]) for u in t])
+    s = np.linspace(7.0, 5.3, T)
+    off = np.stack([np.zeros(T), -3.0 + np.zeros(T)], 1)    # the face below the image centre
+    P = pinhole(Q, R, s, 250.0, off) + 0.2 * np.random.default_rng(1).standard_normal((T, len(idx), 2))
+    return rig, idx, P
+
+
+def test_a_face_at_rest_with_a_moving_head_gets_weights_near_zero(at_rest_moving_head):
+    """Weak perspective reads the head coming closer as expression; with the focal length the largest
+    weight stays near zero. Bound 0.05: 0.2 px of noise on a 5-7 px/unit face is 0.03-0.04 rig units,
+    a tenth of what a weight of 1 moves the eyelids and mouth corners (0.3-1 unit), so noise alone
+    moves a weight by a few hundredths."""
+    rig, idx, P = at_rest_moving_head
+    weak = RigRetargeter(rig, idx).run(P, fps=FPS)
+    pinhole_fit = RigRetargeter(rig, idx, focal=250.0, centre=CENTRE).run(P, fps=FPS)
+    w_weak, w_fix = np.median(weak.weights.max(1)), np.median(pinhole_fit.weights.max(1))
+    assert w_fix <= 0.05
+    assert w_weak >= 2 * w_fix                               # the cause: without it the weights follow the head
+    assert np.nanmean(pinhole_fit.residual) < np.nanmean(weak.residual)
+    # the principal point from the landmarks (no centre given) keeps most of it
+    guessed = RigRetargeter(rig, idx, focal=250.0).run(P, fps=FPS)
+    assert np.median(guessed.weights.max(1)) <= 0.05
+
+
+@pytest.mark.parametrize("focal, centre, name", [(0, None, "focal"), (-3.0, None, "focal"), (np.nan, None, "focal"),
+                                                 (np.inf, None, "focal"), ("wide", None, "focal"),
+                                                 ((300, 300), None, "focal"), (300, (1.0, 2.0, 3.0), "centre"),
+                                                 (300, "middle", "centre"), (300, (np.nan, 1.0), "centre")])
+def test_bad_camera_values_are_one_line_errors(focal, centre, name):
+    with pytest.raises(InputError, match=rf"^{name}: expected .*, found "):
+        check_camera(focal, centre)
+    with pytest.raises(InputError, match=rf"^{name}: expected "):
+        RigRetargeter(default_template(), face_landmarks(), focal=focal, centre=centre)
+    assert check_camera(None, None)[0] == np.inf and check_camera(None, None)[1] is None

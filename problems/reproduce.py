@@ -259,7 +259,7 @@ RECIPES: tuple[Recipe, ...] = (
            + (f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
               "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
               "'cap12:tracking={tmp}/cap12_edit_cuts/cap{{start}}' 'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' "
-              "--out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "
+              "--variants rig_noise,default --out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "
               "--summary-md reports/retarget/rest_cuts_summary.md",),
            data=("ict", "video", "detect", "mediapipe"), script="problems/rest_cuts.py"),
     Recipe("real-clips", "The shared clips captured, retargeted onto ICT and animated on the cartoon: residuals, "

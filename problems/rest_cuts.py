@@ -23,7 +23,8 @@ landmarks within 1.5% of the face width of the cut's frame 0 after a similarity 
 median over them of the largest weight, target <= 0.15; over all frames the median of the largest
 left/right difference, target <= 0.2), with jawOpen on the calm frames and its correlation with the
 inner-lip opening (a cut that starts with the mouth open carries jawOpen on its calm frames: those
-cuts are reported apart, not counted against the target).
+cuts are reported apart, not counted against the target). Variant *rig_noise*: the landmark noise of
+a fixed size in rig units (``noise_model="rig"``, the default before the pixel noise model).
 """
 
 from __future__ import annotations
@@ -45,7 +46,8 @@ MIN_FRAMES = 150
 LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
-VARIANTS = {"before": ({}, False), "default": ({}, True), "no_anchor": ({"rest_anchor": False}, True)}
+VARIANTS = {"before": ({}, False), "default": ({}, True), "no_anchor": ({"rest_anchor": False}, True),
+            "rig_noise": ({"noise_model": "rig"}, True)}
 
 
 @contextlib.contextmanager
@@ -165,14 +167,15 @@ def summary(rows) -> str:
 
 
 def cut_table(rows) -> str:
-    """Markdown: every cut of the default variant beside *before*."""
+    """Markdown: every cut of the default variant beside the first other variant of the rows (the baseline)."""
     by = {(r["clip"], r["mode"], r["start_s"], r["variant"]): r for r in rows}
-    lines = ["| clip | mode | start s | frame 0 | still dev | lip gap / closed | calm | before: anchored, calm max, L/R | "
+    base = next((r["variant"] for r in rows if r["variant"] != "default"), "before")
+    lines = [f"| clip | mode | start s | frame 0 | still dev | lip gap / closed | calm | {base}: anchored, calm max, L/R | "
              "default: anchored, ratio, calm max (shape), calm jawOpen, L/R |", "|---|---|---|---|---|---|---|---|---|"]
     for (clip, mode, st, v), r in sorted(by.items()):
         if v != "default":
             continue
-        b = by.get((clip, mode, st, "before"))
+        b = by.get((clip, mode, st, base))
         bt = f"{b['anchored']:d}, {b['calm_max_median']:.3f}, {b['lr_diff_median']:.3f}" if b else ""
         lines.append(f"| {clip} | {mode} | {st:g} | {r['start']} | {r['start_deviation']:.4f} | "
                      f"{r['start_gap']:.3f} / {r['closed_gap']:.3f} | {int(r['calm_frames'])} | {bt} | {r['anchored']:d}, "

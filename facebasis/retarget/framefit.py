@@ -40,6 +40,26 @@ def check_camera(focal, centre) -> tuple[float, np.ndarray | None]:
     return float(f), c
 
 
+def reference_scale(solver, landmarks, visible, n: int = 40) -> float:
+    """The median scale s (px per rig unit) of up to ``n`` evenly spaced frames of a capture
+    (landmarks (T, L, 2), visible (T, L) bool), each posed on ``solver.v0`` alone (weights 0): the
+    s_ref of :attr:`FrameSolver.pixel_scale` (nan without a frame of 4 visible landmarks).
+
+    A detector's landmark error is a few pixels whatever the face's size in the image (cap12, dlib,
+    the last 20 s: the rms residual does not follow the scale, r = -0.04, while the scale goes from
+    8.2 to 5.2 px/unit), so in rig units it grows as the person moves away; the "auto" ridge is set
+    from the median noise, i.e. at this scale, and the frames of a smaller face weigh their landmarks
+    less (the MAP weights of a fixed pixel noise)."""
+    vis = np.asarray(visible, bool)
+    usable = np.flatnonzero(vis.sum(1) >= 4)
+    scales = []
+    for f in usable[np.unique(np.linspace(0, len(usable) - 1, min(len(usable), n)).round().astype(int))] if len(usable) else []:
+        v = vis[f]
+        s, R, t = fit_pose_affine(solver.v0[v], landmarks[f][v])
+        scales.append(fit_pose_gn(solver.v0[v], landmarks[f][v], s, R, t, iterations=4)[0])
+    return float(np.median(scales)) if scales else float("nan")
+
+
 @dataclass(frozen=True)
 class FrameFit:
     """One frame's fit (:meth:`FrameSolver.solve_frame`): weights x (k,), scale s (px per rig
@@ -80,6 +100,9 @@ class FrameSolver:
     contour : (c,) int64 landmark indices of a sliding contour; contour_slide its along-contour weight
     alternations, tol : pose/weight rounds of a warm-started frame and the weight change that ends them
     ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
+    pixel_scale : None: the data term in rig units (landmark noise of a fixed size on the face); a
+        scale s_ref (px per rig unit): the data term in pixels over s_ref, i.e. each frame's term
+        times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels, :func:`reference_scale`)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
         centre (2,) its principal point, px (see :meth:`flatten`)
     """
@@ -97,6 +120,7 @@ class FrameSolver:
     ipopt: object = None
     focal: float = float("inf")
     centre: np.ndarray | None = None
+    pixel_scale: float | None = None
 
     @property
     def n_shapes(self) -> int:
@@ -153,6 +177,8 @@ class FrameSolver:
         Qp, _ = np.linalg.qr(whiten(pose_jacobian(self.landmarks3d(x_cur)[vis] @ R.T), sqrtw))
         E = E - Qp @ (Qp.T @ E)
         b = b - Qp @ (Qp.T @ b)
+        if self.pixel_scale is not None:                # landmark noise of a fixed size in pixels, not rig units
+            E, b = E * (s / self.pixel_scale), b * (s / self.pixel_scale)   # eq. 5's data term weighted (s/s_ref)^2
         G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
         c = E.T @ b
         lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see :mod:`.rigdrive`
@@ -205,4 +231,4 @@ class FrameSolver:
         return FrameFit(x, float(s), R, t, float(rms), int(nodes), pf)
 
 
-__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera"]
+__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera", "reference_scale"]

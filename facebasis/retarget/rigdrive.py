@@ -47,6 +47,10 @@ noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 p
 20 px/cm gives rho ~0.004 / 0.015 and a lower weight error than 1e-3; a 400-frame dlib webcam capture
 (6.7 px/cm) gives rho 0.49 with ICT's own neutral and 0.20 with ``first_frame_neutral``, and no
 weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
+Landmark noise model (``noise_model="pixels"``, the default): a detector's error has a fixed size in
+pixels, so each frame's data term is weighted ``(s / s_ref)^2`` (s_ref the capture's median scale,
+where the ridge is set): a person who leans away from the camera is not read as an expression
+(cap12's last 20 s: browDown_R 0.45 on calm frames, following the scale at r = -0.81 -> 0.11).
 
 Identity (``identity``): the rig's neutral landmarks are not the filmed person's. ``"auto"`` (the
 default) estimates a static landmark offset from the capture (:func:`.calibrate.calibrate_auto`):
@@ -64,10 +68,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError, named_params, parameter_error
+from ..errors import InputError, named_params, parameter_error, parse_mode
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
-from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
+from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera, reference_scale
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .reststart import rest_start
 from .pose import (
@@ -96,6 +100,8 @@ CONTOUR_SLIDE = 0.05
 IBUG_CONTOUR = tuple(range(17))
 #: sparsity of the weight prior: the linear term ``sparsity * rho * sum_i x_i`` (see the module docstring)
 DEFAULT_SPARSITY = 3.0
+#: landmark noise models of :class:`RigRetargeter` (``noise_model``)
+NOISE_MODELS = ("pixels", "rig")
 #: default identity mode (measured in reports/reproduction/real_clips_notes.md and reports/retarget)
 DEFAULT_IDENTITY = "auto"
 
@@ -151,6 +157,7 @@ class RetargetResult:
         ``"quantile"`` (else None)
     neutral_landmarks : (L, 3) the neutral landmark positions the frames were solved with (the rig's,
         or the person's from the identity step); None when the result was built by hand
+    pixel_scale : s_ref of the pixel noise model (:attr:`.framefit.FrameSolver.pixel_scale`; None: rig units)
     """
 
     names: tuple[str, ...]
@@ -167,6 +174,7 @@ class RetargetResult:
     identity: str = "rig"
     calibration: IdentityCalibration | None = None
     neutral_landmarks: np.ndarray | None = None
+    pixel_scale: float | None = None
 
     @property
     def n_frames(self) -> int:
@@ -254,6 +262,10 @@ class RigRetargeter:
         ``centre`` its principal point (2,) px (None: the capture's median landmark position). Given,
         every fit sees the landmarks with the perspective of the current estimate divided out
         (:meth:`.framefit.FrameSolver.flatten`): a face that comes closer is not read as an expression
+    noise_model : "pixels" (the default): the landmark noise has a fixed size in pixels, so a frame
+        whose face is smaller in the image weighs its landmarks less (the data term times
+        ``(s / s_ref)^2``, s_ref the capture's median scale: :func:`.framefit.reference_scale`);
+        "rig": a fixed size on the face (the former model; the same while the face keeps its size)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
@@ -261,7 +273,7 @@ class RigRetargeter:
                  first_frame_neutral: bool | None = None, identity: str | None = None,
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
                  sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True,
-                 focal: float | None = None, centre=None):
+                 focal: float | None = None, centre=None, noise_model: str = "pixels"):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -301,6 +313,7 @@ class RigRetargeter:
         self.rest_anchor = bool(rest_anchor)
         self.sparsity = float(sparsity)
         focal, centre = check_camera(focal, centre)
+        self.noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
         ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -387,6 +400,9 @@ class RigRetargeter:
             else:
                 noise = self.estimate_noise(landmarks, visible, model)
             model = replace(model, ridge=auto_ridge(noise))
+        if self.noise_model == "pixels":
+            s_ref = reference_scale(model, landmarks, visible)
+            model = replace(model, pixel_scale=s_ref if np.isfinite(s_ref) and s_ref > 0 else None)
         return model, calibration, noise
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -414,7 +430,7 @@ class RigRetargeter:
             if progress is not None:
                 progress(f, T)
         return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0,
-                              model.ridge, noise, self.identity, calibration, model.v0)
+                              model.ridge, noise, self.identity, calibration, model.v0, model.pixel_scale)
 
 
 def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth: float = DEFAULT_SMOOTH,

@@ -53,7 +53,7 @@ def cmd_retarget(args) -> int:
                      ridge=args.ridge, neutral=args.neutral,
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
                      preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
-                     rest_anchor=args.rest_anchor != "off")
+                     rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model or "pixels")
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -159,6 +159,13 @@ def register(subparsers) -> None:
                    help="with --identity auto: when the first frame's posture recurs in the clip and, as the neutral, "
                         "asks the frames for no more negative weight than the commonest posture, the rest face is "
                         "that posture (default on); 'off': the densest cluster of pilot faces alone")
+    p.add_argument("--focal", default=None, action=Once, type=float, metavar="PX",
+                   help="the camera's focal length in pixels (principal point: the image centre); every fit then "
+                        "divides the perspective out of the landmarks, so a face that comes closer is not read as "
+                        "an expression (default: a weak-perspective camera)")
+    p.add_argument("--noise-model", default=None, action=Once, choices=("pixels", "rig"),
+                   help="landmark noise of a fixed size in 'pixels' (default: a frame whose face is smaller in the "
+                        "image weighs its landmarks less) or in 'rig' units (the former model)")
     p.add_argument("--first-frame-neutral", action="store_true",
                    help="older spelling of --identity first-frame (still accepted)")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",

@@ -341,7 +341,8 @@ def _finite(v):
 def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), smooth=None, ridge=None,
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
                  identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
-                 unit: str = "cm", rest_anchor: bool = True) -> dict:
+                 unit: str = "cm", rest_anchor: bool = True, focal: float | None = None,
+                 noise_model: str = "pixels") -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
@@ -351,16 +352,19 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     (:func:`.rigdrive.auto_ridge`); a number fixes it. ``identity`` "auto" (default), "first-frame"
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
     ``rest_anchor``: with ``identity`` "auto", the first frame's posture may be the rest face
-    (:class:`.rigdrive.RigRetargeter`). ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    (:class:`.rigdrive.RigRetargeter`). ``focal`` (px, None: weak perspective; principal point the image
+    centre) and ``noise_model`` ("pixels" or "rig"): :class:`.rigdrive.RigRetargeter`. ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
     (the source video beside the rig rendered with the solved weights and head rotation) and
     ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
     from ..rigging.examples import parse_pairs
     from ..geometry.gltf import unit_scale
+    from .framefit import check_camera
     from .preview import rig_frames
     from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
 
     unit_scale(unit)                                  # a bad --unit: said before any work
+    check_camera(focal, None)                         # and a bad focal length
     ridge = _parse_ridge(ridge)
     from .rigdrive import IDENTITY_MODES
 
@@ -376,14 +380,17 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     named = parse_pairs(exclusive) if exclusive else tuple(default_pairs)
     resolve_pairs(r, named)                           # unknown names: RigError, before any work
     smooth = DEFAULT_SMOOTH if smooth is None else float(smooth)
-    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity, rest_anchor=rest_anchor)
+    centre = None if focal is None else (cap.size[0] / 2.0, cap.size[1] / 2.0)
+    solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity, rest_anchor=rest_anchor,
+                               focal=focal, centre=centre, noise_model=noise_model)
     ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
          + f"; smooth {smooth:g}, ridge {ridge_text}; identity {identity}")
     result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
     extra = {"smooth": smooth, "ridge": result.ridge, "ridge_rule": "auto" if ridge == "auto" else "given",
-             "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame"}
+             "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame",
+             "focal_px": focal, "noise_model": solver_obj.noise_model, "noise_pixel_scale": result.pixel_scale}
     cal = result.calibration
     if cal is not None:
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))

@@ -316,3 +316,43 @@ def test_rest_anchor_option(capture, tmp_path, capsys, monkeypatch):
                       (["--rest-anchor", "on", "--rest-anchor", "off"], "--rest-anchor")):
         parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
         assert not (tmp_path / "bad").exists()
+
+
+def test_focal_and_noise_model_options(capture, tmp_path, capsys, monkeypatch):
+    """--focal PX and --noise-model pixels|rig reach the solver (defaults: the library's; the principal
+    point is the image centre), are recorded in the summary; bad or repeated values are one line with
+    nothing written."""
+    import inspect
+
+    from facebasis.retarget.rigdrive import RigRetargeter
+
+    folder, _ = capture
+    seen = []
+    original = RigRetargeter.__init__
+
+    def spy(self, *a, **kw):
+        seen.append((kw.get("focal"), kw.get("centre"), kw.get("noise_model")))
+        original(self, *a, **kw)
+
+    monkeypatch.setattr(RigRetargeter, "__init__", spy)
+    for extra, want in (([], (None, None, "pixels")), (["--focal", "600", "--noise-model", "rig"], (600.0, (256.0, 256.0), "rig"))):
+        out = tmp_path / f"rt{len(seen)}"
+        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
+        assert code == 0, stdout
+        assert seen[-1] == want
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["focal_px"] == want[0] and summary["noise_model"] == want[2]
+        assert (summary["noise_pixel_scale"] is None) == (want[2] == "rig")
+    assert inspect.signature(original).parameters["noise_model"].default == "pixels"
+    assert inspect.signature(original).parameters["focal"].default is None
+    for argv, msg in ((["--focal", "0"], "--focal: expected a focal length in pixels > 0, found 0"),
+                      (["--focal", "nan"], "--focal: expected"), (["--focal", "-5"], "--focal: expected")):
+        code, stdout, err = run(["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys)
+        assert code == 2 and msg in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "bad").exists()
+    for argv, msg in ((["--focal", "wide"], "invalid float value: 'wide'"),
+                      (["--noise-model", "metres"], "invalid choice: 'metres'"),
+                      (["--focal", "500", "--focal", "600"], "--focal"),
+                      (["--noise-model", "rig", "--noise-model", "pixels"], "--noise-model")):
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
+        assert not (tmp_path / "bad").exists()

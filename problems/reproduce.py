@@ -254,13 +254,20 @@ RECIPES: tuple[Recipe, ...] = (
            CAPTURES + tuple(
                f"{{python}} -m facebasis.cli capture {{shared}}/data/video/{clip}.mp4 --detector mediapipe "
                f"--no-overlay --out {{tmp}}/{clip}_mp" for clip in ("cap12_edit", "cap13_edit2")) + tuple(
-               f"{PY} problems.rest_cuts --make-track-cuts {{shared}}/data/video/{clip}.mp4 {{tmp}}/{clip}_cuts"
+               f"{PY} problems.rest_cuts --make-track-cuts {{shared}}/data/video/{clip}.mp4 {{tmp}}/{clip}_cuts --step 200"
                for clip in ("cap12_edit", "cap13_edit2"))
            + (f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
               "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
-              "'cap12:tracking={tmp}/cap12_edit_cuts/cap{{start}}' 'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' "
-              "--variants rig_noise,default --out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "
-              "--summary-md reports/retarget/rest_cuts_summary.md",),
+              "--variants rig_noise,default --step 200 --first 100 --out {tmp}/rest_cuts_det.csv",
+              f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
+              "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
+              "--variants rig_noise,default --step 100000 --out {tmp}/rest_cuts_start.csv",
+              f"{PY} problems.rest_cuts 'cap12:tracking={{tmp}}/cap12_edit_cuts/cap{{{{start}}}}' "
+              "'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' --variants rig_noise,default --step 200 "
+              "--out {tmp}/rest_cuts_track.csv",
+              f"{PY} problems.rest_cuts --merge {{tmp}}/rest_cuts_start.csv {{tmp}}/rest_cuts_det.csv "
+              "{tmp}/rest_cuts_track.csv --out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "
+              "--summary-md reports/retarget/rest_cuts_summary.md"),
            data=("ict", "video", "detect", "mediapipe"), script="problems/rest_cuts.py"),
     Recipe("real-clips", "The shared clips captured, retargeted onto ICT and animated on the cartoon: residuals, "
            "weights, inner lips, speed; weight plots and cartoon strips",

@@ -69,6 +69,17 @@ def _head_options(p, what: str) -> None:
                    help="the same as --head follow")
 
 
+def _camera_args(p) -> None:
+    """--focal and --noise-model (the camera and the landmark noise model of the rig fit)."""
+    p.add_argument("--focal", default=None, action=Once, type=float, metavar="PX",
+                   help="the camera's focal length in pixels (principal point: the image centre); every fit then "
+                        "divides the perspective out of the landmarks, so a face that comes closer is not read as "
+                        "an expression (default: a weak-perspective camera)")
+    p.add_argument("--noise-model", default=None, action=Once, choices=("pixels", "rig"),
+                   help="landmark noise of a fixed size in 'pixels' (default: a frame whose face is smaller in the "
+                        "image weighs its landmarks less) or in 'rig' units (the former model)")
+
+
 def register(subparsers) -> None:
     """Add ``animate2d``, ``animate3d`` and ``retarget`` to an argparse sub-parser collection."""
     p = subparsers.add_parser(
@@ -159,15 +170,8 @@ def register(subparsers) -> None:
                    help="with --identity auto: when the first frame's posture recurs in the clip and, as the neutral, "
                         "asks the frames for no more negative weight than the commonest posture, the rest face is "
                         "that posture (default on); 'off': the densest cluster of pilot faces alone")
-    p.add_argument("--focal", default=None, action=Once, type=float, metavar="PX",
-                   help="the camera's focal length in pixels (principal point: the image centre); every fit then "
-                        "divides the perspective out of the landmarks, so a face that comes closer is not read as "
-                        "an expression (default: a weak-perspective camera)")
-    p.add_argument("--noise-model", default=None, action=Once, choices=("pixels", "rig"),
-                   help="landmark noise of a fixed size in 'pixels' (default: a frame whose face is smaller in the "
-                        "image weighs its landmarks less) or in 'rig' units (the former model)")
-    p.add_argument("--first-frame-neutral", action="store_true",
-                   help="older spelling of --identity first-frame (still accepted)")
+    _camera_args(p)
+    p.add_argument("--first-frame-neutral", action="store_true", help="older spelling of --identity first-frame")
     p.add_argument("--unit", default="cm", metavar="cm|m|mm",
                    help="the rig's length unit; animation.glb is written in metres (default cm: ICT-FaceKit and the "
                         "built-in face)")

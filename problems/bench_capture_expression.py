@@ -9,9 +9,11 @@ are correlated (Pearson, over time) with dlib's on the same frames, on every fra
 every 10th frame (``r10_*``, the sampling of the cartoon benchmark's check).
 
 Methods: ``tracking only`` (dlib's first-frame points, no detector after), ``--detector dlib`` and
-``--detector mediapipe`` (detections replayed, fed to the filter), ``mediapipe alone`` (how far two
-detectors agree: the reference's own noise), and with ``--variants`` the tracker stages switched off
-one by one (no filter, no drift correction, eyelid model off).
+``--detector mediapipe`` (detections replayed, fed to the filter), each beside ``no lid model`` (the
+tracker before :mod:`facebasis.capture.eyelids`: ``detected_lids=0, lid_search=False``), ``mediapipe
+alone`` (how far two detectors agree: the reference's own noise), and with ``--variants`` the stages
+of the earlier tracker switched off (no filter, no drift correction) and other gains of the detected
+lids.
 
 Blinks: the frames where dlib's eye opening falls below 60 % of its running median (31 frames), grouped
 into events; ``blink_<method>`` is the method's mean eye opening on those frames divided by its running
@@ -109,10 +111,14 @@ def run_clip(clip: Path, cache: Path | None, variants: bool, rows: list) -> None
             return capture(open_frames(clip), landmarks=lm0, options=opt).capture.landmarks
         return capture(open_frames(clip), detector=det, options=opt).capture.landmarks
 
+    off = TrackerOptions(detected_lids=0.0, lid_search=False)       # the tracker before the lid model
     methods = {"dlib": lambda: ref, "mediapipe alone": lambda: mp,
                "tracking only": lambda: cap(),
+               "tracking only, no lid model": lambda: cap(off),
                "--detector dlib": lambda: cap(det=_Replay(ref, "dlib")),
-               "--detector mediapipe": lambda: cap(det=_Replay(mp, "mediapipe"))}
+               "--detector dlib, no lid model": lambda: cap(off, _Replay(ref, "dlib")),
+               "--detector mediapipe": lambda: cap(det=_Replay(mp, "mediapipe")),
+               "--detector mediapipe, no lid model": lambda: cap(off, _Replay(mp, "mediapipe"))}
     if variants:
         methods.update(_variants(cap, ref, mp, TrackerOptions))
     print(f"  {'method':44s} " + " ".join(f"{n[:11]:>11s}" for n in FEATURES) + "  r10_eye  blink  jitter")
@@ -127,13 +133,13 @@ def run_clip(clip: Path, cache: Path | None, variants: bool, rows: list) -> None
 def _variants(cap, ref, mp, TrackerOptions):
     from dataclasses import replace
 
-    o = TrackerOptions()
-    return {"tracking only, no filter": lambda: cap(replace(o, use_filter=False)),
-            "tracking only, no drift correction": lambda: cap(replace(o, drift_correction=False)),
-            "--detector dlib, no drift correction": lambda: cap(replace(o, drift_correction=False),
-                                                                _Replay(ref, "dlib")),
-            "--detector mediapipe, no drift correction": lambda: cap(replace(o, drift_correction=False),
-                                                                     _Replay(mp, "mediapipe"))}
+    o = TrackerOptions(detected_lids=0.0, lid_search=False)
+    return {"no lid model, no filter": lambda: cap(replace(o, use_filter=False)),
+            "no lid model, no drift correction": lambda: cap(replace(o, drift_correction=False)),
+            "--detector dlib, no lid model, no drift correction": lambda: cap(replace(o, drift_correction=False),
+                                                                              _Replay(ref, "dlib")),
+            "--detector dlib, detected_lids=1": lambda: cap(TrackerOptions(detected_lids=1.0), _Replay(ref, "dlib")),
+            "--detector dlib, detected_lids=0.4": lambda: cap(TrackerOptions(detected_lids=0.4), _Replay(ref, "dlib"))}
 
 
 def main(argv=None) -> int:

@@ -156,3 +156,40 @@ def test_eyes_blink_with_a_detector(blink):
     assert np.corrcoef(e, truth)[0, 1] >= 0.97
     old = eye_opening(_track(blink, TrackerOptions(detected_lids=0.0, lid_search=False), noise=0.5))
     assert np.abs(old - truth).max() > 0.2 * amp and np.abs(old - truth).mean() > 0.08 * amp
+
+
+def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeypatch):
+    """--detected-lids: bad values are one line naming the option before any work, given twice is
+    refused; --detected-lids and --no-lid-search reach TrackerOptions, and without them the library's
+    defaults apply."""
+    import cv2
+
+    import facebasis.capture.tracker as tracker
+    from facebasis.capture.landmarks import format_pts
+    from facebasis.cli import main
+
+    from conftest import parser_refuses
+
+    seq = synthetic_sequence(3, size=(96, 96))
+    d = tmp_path / "frames"
+    d.mkdir()
+    for i, f in enumerate(seq.frames):
+        cv2.imwrite(str(d / f"f{i:03d}.png"), f[..., ::-1])
+    (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))
+    base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
+    for bad in ("-0.1", "1.5", "nan", "half"):
+        out = tmp_path / f"bad{bad}"
+        assert main([*base, "--out", str(out), "--detected-lids", bad]) == 2
+        err = capsys.readouterr().err
+        assert f"--detected-lids: expected a number in [0, 1], found '{bad}'" in err and err.count("\n") == 1
+        assert not out.exists()
+    parser_refuses(main, [*base, "--out", str(tmp_path / "twice"), "--detected-lids", "1", "--detected-lids", "0"],
+                   capsys, "--detected-lids")
+    seen = []
+    real = tracker.capture
+    monkeypatch.setattr(tracker, "capture", lambda *a, **k: seen.append(
+        (k["options"].detected_lids, k["options"].lid_search)) or real(*a, **k))
+    assert main([*base, "--out", str(tmp_path / "o1"), "--detected-lids", "0.25", "--no-lid-search"]) == 0
+    assert main([*base, "--out", str(tmp_path / "o2")]) == 0
+    assert main([*base, "--out", str(tmp_path / "o3"), "--no-lid-search", "--no-lid-search"]) == 0
+    assert seen == [(0.25, False), (TrackerOptions().detected_lids, True), (TrackerOptions().detected_lids, False)]

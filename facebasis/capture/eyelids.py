@@ -15,7 +15,7 @@ that takes the eye corners (36, 39 / 42, 45) to ``-1/2`` and ``1/2`` in the comp
 back on the *tracked* corners, ``p = m + (c_1 - c_0) z`` (:func:`place_lids`), which Lucas-Kanade
 follows well (rigid, textured). ``z`` comes from:
 
-* a detection (detector mode, :class:`DetectedLids`): the detector sees the lid whatever its
+* a detection (detector mode, :class:`Eyelids`): the detector sees the lid whatever its
   appearance; an exponential average of gain ``g`` (``TrackerOptions.detected_lids``) smooths its
   jitter (dlib's integer coordinates: 0.17 px on the opening, per frame),
   ``z_t = z_{t-1} + g (z_t^det - z_{t-1})``, at the price of a lag of ``(1 - g) / g`` frames;
@@ -65,16 +65,22 @@ def place_lids(lm: np.ndarray, coords: np.ndarray) -> np.ndarray:
     return out
 
 
-class DetectedLids:
-    """Running lid coordinates of a take, fed by each frame's detection (see the module docstring).
+class Eyelids:
+    """The lids of a take (see the module docstring): running lid coordinates fed by each frame's
+    detection, or, without one, searched by a :class:`LidSearch`.
 
     Parameters
     ----------
     n_landmarks : int
         Landmarks of the take; the model acts only on 68 (iBUG) points.
     gain : float
-        ``g`` in ``[0, 1]``: weight of each frame's detected lid coordinates (0: off, the tracker's own
-        lids).
+        ``g`` in ``[0, 1]``: weight of each frame's detected lid coordinates (0: detections are not
+        used for the lids, which are then placed as without one).
+    search : LidSearch, optional
+        Finds the lids without a detection (None: the tracker's own lids are kept).
+    z0 : ndarray, complex (2, 4), optional
+        Frame 0's lid coordinates: without a detection the lids keep their along-eye coordinate
+        (``z0.real``), on which the lid line gives no evidence.
     """
 
     def __init__(self, n_landmarks: int, gain: float, search: "LidSearch | None" = None, z0=None):
@@ -215,13 +221,13 @@ class LidSearch:
         return np.where(best >= self.zncc, z, complex(np.nan, np.nan))
 
 
-def eyelid_model(gray: np.ndarray, lm: np.ndarray, scale: float, options) -> DetectedLids:
+def eyelid_model(gray: np.ndarray, lm: np.ndarray, scale: float, options) -> Eyelids:
     """The eyelid model of a take from frame 0 ``gray`` (H, W) and its landmarks ``lm`` (L, 2), the face
     scale and :class:`facebasis.capture.options.TrackerOptions` (``detected_lids``, ``lid_search``)."""
     if not isinstance(options.lid_search, (bool, np.bool_)):
         raise parameter_error("lid_search", "True or False", repr(options.lid_search))
     search = LidSearch(gray, lm, LID_BLUR * scale) if options.lid_search and len(lm) == 68 else None
-    return DetectedLids(len(lm), options.detected_lids, search, None if search is None else search.z0)
+    return Eyelids(len(lm), options.detected_lids, search, None if search is None else search.z0)
 
 
-__all__ = ["EYE_CORNERS", "EYE_LIDS", "DetectedLids", "LidSearch", "eyelid_model", "lid_coordinates", "place_lids"]
+__all__ = ["EYE_CORNERS", "EYE_LIDS", "Eyelids", "LidSearch", "eyelid_model", "lid_coordinates", "place_lids"]

@@ -5,7 +5,7 @@ corners (facebasis.capture.eyelids), and a synthetic blink whose lid *covers* th
 import numpy as np
 import pytest
 
-from facebasis.capture.eyelids import EYE_LIDS, DetectedLids, lid_coordinates, place_lids
+from facebasis.capture.eyelids import EYE_LIDS, Eyelids, lid_coordinates, place_lids
 from facebasis.capture.synthetic import Motion, cartoon_face, synthetic_sequence
 from facebasis.capture.tracker import FaceTracker, TrackerOptions
 from facebasis.errors import InputError
@@ -37,23 +37,23 @@ def test_detected_lids_follow_the_detection_on_the_tracked_corners():
     det = lm.copy()
     det[[37, 38]] += [0, 2.0]             # the detector sees the right eye half closed
     tracked = lm + [4.0, -1.0]            # the tracker moved the whole face
-    out = DetectedLids(68, 1.0).follow(tracked, det)
+    out = Eyelids(68, 1.0).follow(tracked, det)
     assert np.allclose(out[[37, 38]], det[[37, 38]] + [4.0, -1.0])
     assert np.allclose(np.delete(out, [37, 38], 0), np.delete(tracked, [37, 38], 0))
     # a gain g moves the running coordinate by g of the way each frame
-    lids = DetectedLids(68, 0.5)
+    lids = Eyelids(68, 0.5)
     first = lids.follow(tracked, det)
     assert np.allclose(first[[37, 38]], tracked[[37, 38]] + [0, 1.0])
     assert np.allclose(lids.follow(tracked, det)[[37, 38]], tracked[[37, 38]] + [0, 1.5])
     # an eye the detector missed keeps the tracker's own lids; the other eye is still placed
     half = det.copy()
     half[36:42] = np.nan
-    out = DetectedLids(68, 1.0).follow(tracked, half)
+    out = Eyelids(68, 1.0).follow(tracked, half)
     assert np.allclose(out, tracked)
     # off: gain 0, no detection, or not 68 points
-    assert DetectedLids(68, 0.0).follow(tracked, det) is tracked
-    assert DetectedLids(68, 1.0).follow(tracked, None) is tracked
-    assert DetectedLids(5, 1.0).follow(tracked[:5], det[:5]) is not None
+    assert Eyelids(68, 0.0).follow(tracked, det) is tracked
+    assert Eyelids(68, 1.0).follow(tracked, None) is tracked
+    assert Eyelids(5, 1.0).follow(tracked[:5], det[:5]) is not None
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), True, "0.5", None])

@@ -102,24 +102,26 @@ class Eyelids:
         where an eye was not detected); without a detection, where the :class:`LidSearch` (if any) finds
         them on ``gray``. ``filt`` (a :class:`facebasis.capture.particle.CondensationFilter`) is moved
         along so the next frame starts from the placed lids."""
+        if (detections is None or not self.active) and self.z0 is None and (self.search is None or gray is None):
+            self._z = None
+            return lm
+        own = lid_coordinates(lm)
+        frame_ok = np.all(np.isfinite(own), axis=1, keepdims=True)     # (2, 1): the eye's corners apart
         if detections is None or not self.active:
-            if self.z0 is None and (self.search is None or gray is None):
-                self._z = None
-                return lm
-            own = lid_coordinates(lm)
             if self.z0 is not None:     # along the eye the lid line gives no evidence: frame 0's place
                 own = self.z0.real + 1j * own.imag
             z = own if self.search is None or gray is None else self.search.search(gray, lm)
             z = np.where(np.isfinite(z), z, own)
         else:
-            own = lid_coordinates(lm)
             det = lid_coordinates(np.asarray(detections, float))
             prev = own if self._z is None else np.where(np.isfinite(self._z), self._z, own)
             seen = np.all(np.isfinite(det), axis=1, keepdims=True)
             z = np.where(seen, prev + self.gain * (np.where(seen, det, 0) - prev), own)
             z = np.where(np.isfinite(z), z, own)
+        z = np.where(frame_ok, z, np.nan)
         self._z = z
         out = place_lids(lm, z)
+        out = np.where(np.isfinite(out), out, lm)     # collapsed eye corners: the tracker's points stand
         if filt is not None:
             filt.place(EYE_LIDS.ravel(), out[EYE_LIDS.ravel()])
         return out

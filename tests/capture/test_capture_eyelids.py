@@ -193,3 +193,17 @@ def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeyp
     assert main([*base, "--out", str(tmp_path / "o2")]) == 0
     assert main([*base, "--out", str(tmp_path / "o3"), "--no-lid-search", "--no-lid-search"]) == 0
     assert seen == [(0.25, False), (TrackerOptions().detected_lids, True), (TrackerOptions().detected_lids, False)]
+
+
+def test_collapsed_eye_corners_leave_the_tracked_points():
+    """Eye corners on one pixel (a lost track) give no eye frame: the tracker's points stand, no NaN."""
+    img, lm = cartoon_face((128, 128))
+    from facebasis.capture.eyelids import LidSearch
+    from facebasis.capture.video import gray_pair
+
+    gray = gray_pair(img)[0]
+    bad = lm.copy()
+    bad[39] = bad[36]
+    for lids in (Eyelids(68, 1.0), Eyelids(68, 0.7, LidSearch(gray, lm, 0.5), lid_coordinates(lm))):
+        out = lids.follow(bad, lm if lids.search is None else None, gray=gray)
+        assert np.all(np.isfinite(out)) and np.allclose(out[36:42], bad[36:42])

@@ -92,11 +92,6 @@ class Eyelids:
         self.gain = float(gain)
         self._z = None     # complex (2, 4): last frame's coordinates
 
-    def placed(self, detections: np.ndarray | None) -> np.ndarray:
-        """Indices of the lid points this frame's ``detections`` will place (empty without one): their
-        Lucas-Kanade motion (a blink) is no evidence for their neighbours' (brows, corners)."""
-        return EYE_LIDS.ravel() if self.active and detections is not None else np.zeros(0, np.int64)
-
     def follow(self, lm: np.ndarray, detections: np.ndarray | None, filt=None, gray=None) -> np.ndarray:
         """Landmarks ``(68, 2)`` with the lids placed from ``detections`` ``(68, 2)`` (or the tracker's own
         where an eye was not detected); without a detection, where the :class:`LidSearch` (if any) finds

@@ -259,8 +259,7 @@ class FaceTracker:
             lk = self._correct_drift(lk, gray)
         if self.filter is not None:
             ok = lk.ok | self._drift_ok
-            # placed by the lip / lid models: no LK evidence for their neighbours
-            ok[self._inner], ok[self._lids.placed(detections)] = self._lip_seen(), False
+            ok[self._inner] = self._lip_seen()   # placed by the lip model: no LK evidence for their neighbours
             lm, lost = self.filter.step(gray, lk.points, ok, detections, detection_sigma,
                                         trusted=self._drift_ok & ok)
         else:

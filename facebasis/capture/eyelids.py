@@ -169,16 +169,11 @@ class LidSearch:
         p = 0.5 * (c0 + c1)[:, None, None, None] + (c1 - c0)[:, None, None, None] * (
             z[..., None] + self.offsets[:, :, None, :])
         xy = np.stack([p.real, p.imag], -1)
-        xy = np.where(np.isfinite(xy), xy, 0.0)
-        # the box the profiles lie in: the eyes widened by a corner distance (shifts up to one
-        # opening, profiles 0.6 of one; both under half a corner distance on any eye)
-        eyes = lm[36:48][np.all(np.isfinite(lm[36:48]), axis=1)]
-        r = float(np.nanmax(np.abs(c1 - c0))) if len(eyes) else 0.0
+        ok = np.isfinite(xy).all(-1)
+        xy = np.where(ok[..., None], xy, 0.0)
         h, w = gray.shape
-        if not (len(eyes) and np.isfinite(r)):
-            eyes, r = np.array([[0.0, 0.0], [w - 1.0, h - 1.0]]), 0.0
-        lo = np.clip(np.floor(eyes.min(0) - r) - 4, 0, [w - 1, h - 1]).astype(int)
-        hi = np.clip(np.ceil(eyes.max(0) + r) + 5, lo + 1, [w, h]).astype(int)
+        lo = np.clip(np.floor(xy.reshape(-1, 2).min(0)) - 4, 0, [w - 1, h - 1]).astype(int)
+        hi = np.clip(np.ceil(xy.reshape(-1, 2).max(0)) + 5, lo + 1, [w, h]).astype(int)
         box = np.ascontiguousarray(gray[lo[1]:hi[1], lo[0]:hi[0]])
         if self.sigma > 0:
             box = cv2.GaussianBlur(box, (0, 0), self.sigma)

@@ -279,7 +279,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("capture-expression", "Expression measures of captures (tracking only, dlib, MediaPipe; with and without "
            "the eyelid model) against per-frame dlib on the shared clips: per-feature correlations, blinks",
            ("capture/expression.csv",),
-           (f"{PY} problems.bench_capture_expression --cache {{tmp}}/detections --variants",),
+           (f"{PY} problems.bench_capture_expression --cache {{tmp}}/detections",),
            data=("video", "detect", "mediapipe"), script="problems/bench_capture_expression.py"),
     Recipe("cartoon-expression", "Expressions kept on the shared clips, per feature: capture / warp / detector "
            "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still), "

@@ -22,7 +22,9 @@ blink; MediaPipe's and dlib's own values are rows too). dlib's frame-to-frame ji
 eye opening (``jitter``: robust standard deviation of its second difference / sqrt(6), in pixels and in
 eye-corner distances) estimates its noise on a 3-5 px opening.
 
-Writes ``reports/capture/expression.csv`` (``--out``).
+Also the landmark error against dlib (``mean_px``: all 68 points and frames, as
+:mod:`problems.bench_capture_real`; ``eye_px``: the 12 eye points). Writes
+``reports/capture/expression.csv`` (``--out``).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.bench_capture_real import CLIPS, OUT, VIDEO_DIR, _Replay, detections
+from problems.bench_capture_real import CLIPS, OUT, VIDEO_DIR, _Replay, detections, errors
 from problems.bench_cartoon import FEATURES, correlation, features
 
 #: a frame is a blink frame when dlib's eye opening is below this fraction of its running median
@@ -130,13 +132,16 @@ def run_clip(clip: Path, cache: Path | None, variants: bool, rows: list) -> None
                "--detector mediapipe, no lid model": lambda: cap(off, _Replay(mp, "mediapipe"))}
     if variants:
         methods.update(_variants(cap, ref, mp, TrackerOptions))
-    print(f"  {'method':44s} " + " ".join(f"{n[:11]:>11s}" for n in FEATURES) + "  r10_eye  blink  jitter")
+    print(f"  {'method':44s} " + " ".join(f"{n[:11]:>11s}" for n in FEATURES) + "  r10_eye  blink  jitter  mean_px  eye_px")
     for name, fn in methods.items():
-        f = feature_series(fn())
-        r = row_for(clip.name, name, f, fr, blinks)
+        lm = fn()
+        r = row_for(clip.name, name, feature_series(lm), fr, blinks)
+        r["mean_px"] = float(errors(lm, ref)["mean_px"])
+        r["eye_px"] = float(np.linalg.norm(lm[:, 36:48] - ref[:, 36:48], axis=-1).mean())
         rows.append(r)
         print(f"  {name:44s} " + " ".join(f"{r[f'r_{n}']:11.3f}" for n in FEATURES)
-              + f"  {r['r10_eye_open']:7.3f}  {r['blink_ratio']:5.2f}  {r['eye_jitter']:.4f}", flush=True)
+              + f"  {r['r10_eye_open']:7.3f}  {r['blink_ratio']:5.2f}  {r['eye_jitter']:.4f}  {r['mean_px']:7.3f}"
+              + f"  {r['eye_px']:6.3f}", flush=True)
 
 
 def _variants(cap, ref, mp, TrackerOptions):

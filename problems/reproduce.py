@@ -283,6 +283,11 @@ RECIPES: tuple[Recipe, ...] = (
                        "cp {tmp}/cartoon/bench_cartoon.csv reports/reproduction/cartoon_warp.csv",
                        "cp {tmp}/cartoon/bench_cartoon.md reports/reproduction/cartoon_warp.md"),
            data=("video", "detect"), script="problems/bench_cartoon.py"),
+    Recipe("capture-expression", "Expression measures of captures (tracking only, dlib, MediaPipe; with and without "
+           "the eyelid model) against per-frame dlib on the shared clips: per-feature correlations, blinks",
+           ("capture/expression.csv",),
+           (f"{PY} problems.bench_capture_expression --cache {{tmp}}/detections",),
+           data=("video", "detect", "mediapipe"), script="problems/bench_capture_expression.py"),
     Recipe("cartoon-expression", "Expressions kept on the shared clips, per feature: capture / warp / detector "
            "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still), "
            "detector and tracking-only captures",

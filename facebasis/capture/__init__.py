@@ -9,6 +9,7 @@ data term plus a smoothness term (eq. 1-5).
 
 Modules: ``video`` (frame sources), ``landmarks`` (files, iBUG-68 regions, LK windows),
 ``detect`` (optional dlib and MediaPipe detectors), ``lips`` (inner lips placed from the outer lip),
+``eyelids`` (lids placed in the eye-corner frame: from detections, or searched across the eye),
 ``facemesh`` (mesh), ``harmonic`` (eq. 6-9), ``lk`` (Lucas-Kanade, drift correction), ``particle``
 (CONDENSATION), ``meshtrack`` (eq. 1-5), ``options`` (:class:`TrackerOptions`), ``tracker``
 (:class:`FaceTracker`, :func:`capture`), ``inputs`` (what :func:`capture` checks before any work,

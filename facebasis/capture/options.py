@@ -75,6 +75,18 @@ class TrackerOptions:
         A landmark farther than this many (frame-0) face widths from where the affine motion of its
         neighbours since frame 0 puts it is moved there and reported lost (0: off); see
         :meth:`FaceTracker._repair_outliers`.
+    detected_lids : float
+        In detector mode, weight ``g`` in ``[0, 1]`` of each frame's detected eyelids: every lid point is
+        placed in the frame of its eye's tracked corners at the running average
+        ``z_t = z_{t-1} + g (z_det - z_{t-1})`` of its detected coordinate there
+        (:mod:`facebasis.capture.eyelids`), so the eyes blink when the detector sees a blink. 0: the
+        lids are tracked as without a detector (the filter, trusting Lucas-Kanade and the drift
+        correction against the open first-frame eye, barely let a detection move them).
+    lid_search : bool
+        Without a detection (tracking only, or a frame the detector missed), keep each lid point at
+        its first-frame place along the eye and search the lid across the eye for the first-frame look
+        of its outer side (:class:`facebasis.capture.eyelids.LidSearch`). False: the lids are tracked
+        as the other points (they slid along the lid line and did not follow a lid covering the eye).
     filter : FilterOptions
     mesh : MeshOptions
     """
@@ -93,5 +105,7 @@ class TrackerOptions:
     drift_blur: float = 0.5
     drift_recovery: float = 4.0
     outlier_distance: float = 0.15
+    detected_lids: float = 0.7
+    lid_search: bool = True
     filter: FilterOptions = field(default_factory=FilterOptions)
     mesh: MeshOptions = field(default_factory=MeshOptions)

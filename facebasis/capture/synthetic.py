@@ -152,6 +152,12 @@ class Motion:
         Peak head translation.
     periods : tuple of float
         Periods (frames) of mouth, smile, blink, brow and head motion.
+    lid_close : float
+        Fraction (0-1) of the eye opening the upper lids close at the peak of each blink (same timing
+        as ``blink``) by *covering* the eye, as a real lid does: the part of the eye above the lowered
+        lid line is painted with the surrounding skin (the eye inpainted away) and the lid line drawn
+        at its new place, so the eye's appearance changes instead of its texture being warped
+        (:meth:`WarpAnimation.lid_shift` gives the lid landmarks' motion). 0: off.
     """
 
     mouth_open: float = 0.10
@@ -162,6 +168,7 @@ class Motion:
     scale: float = 0.04
     translation: float = 0.06
     periods: tuple = (40.0, 70.0, 25.0, 55.0, 90.0)
+    lid_close: float = 0.0
 
 
 class WarpAnimation:
@@ -197,6 +204,37 @@ class WarpAnimation:
         amp = np.array([motion.mouth_open, motion.smile, motion.blink, motion.brow_raise]) * fw
         amp[2] = min(motion.blink * fw, 0.8 * eye_h)
         self.amp = amp
+        self._lid_skin = _eyes_inpainted(self.image, lm) if motion.lid_close > 0 else None
+
+    def lid_shift(self, t: float) -> np.ndarray:
+        """Displacement ``(68, 2)`` of the neutral landmarks by the covering lids at frame ``t`` (before the
+        warp): upper-lid points 37, 38, 43, 44 moved towards their lower partners 41, 40, 47, 46 by
+        ``lid_close`` times the blink weight; zero elsewhere."""
+        d = np.zeros((len(self.lm0), 2))
+        if self.motion.lid_close > 0 and len(self.lm0) == 68:
+            w = self.params(t)[0][2] * self.motion.lid_close
+            d[_UPPER] = w * (self.lm0[_LOWER] - self.lm0[_UPPER])
+        return d
+
+    def _lidded(self, t: float) -> np.ndarray:
+        """The neutral image with the lids of frame ``t`` drawn over the eyes."""
+        import cv2
+
+        if self._lid_skin is None or not np.any(self.lid_shift(t)):
+            return self.image
+        lm, new = self.lm0, self.lm0 + self.lid_shift(t)
+        img, mask = self.image.copy(), np.zeros(self.image.shape[:2], np.uint8)
+        P = lambda pts: np.round(np.asarray(pts) * 16).astype(np.int32)
+        t_px = max(1, round(face_width(lm) / 61.0))   # the drawn outline's width (cartoon_face's)
+        lift = np.array([[0, 0], [0, 0.5 * t_px + 0.5], [0, 0.5 * t_px + 0.5], [0, 0]])
+        for a in (36, 42):     # the old lid line (its outline too) down to the lowered lid, corners kept
+            cover = np.concatenate([lm[a:a + 4] - lift, new[[a + 3, a + 2, a + 1, a]]])
+            cv2.fillPoly(mask, [P(cover)], 255, cv2.LINE_AA, 4)
+        m = (mask.astype(np.float32) / 255)[..., None]
+        img = np.clip(img * (1 - m) + self._lid_skin * m, 0, 255).astype(np.uint8)
+        for a in (36, 42):
+            cv2.polylines(img, [P(new[a:a + 4])], False, (40, 30, 25), t_px, cv2.LINE_AA, 4)
+        return img
 
     def params(self, t: float):
         """Expression weights ``(4,)`` in [0, 1] and head motion ``(angle rad, scale, tx, ty)`` at frame ``t``."""
@@ -252,7 +290,24 @@ class WarpAnimation:
         mxx, myy = np.meshgrid(xs, ys)
         fx = cv2.remap(big_x, mxx, myy, cv2.INTER_LINEAR)
         fy = cv2.remap(big_y, mxx, myy, cv2.INTER_LINEAR)
-        return cv2.remap(self.image, fx, fy, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        return cv2.remap(self._lidded(t), fx, fy, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+
+
+#: iBUG-68 upper-lid points and the lower-lid points below them
+_UPPER, _LOWER = np.array([37, 38, 43, 44]), np.array([41, 40, 47, 46])
+
+
+def _eyes_inpainted(image: np.ndarray, lm: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 with both eyes (68 landmarks) inpainted from the skin around them
+    (OpenCV's Telea inpainting): the skin of a closed lid, float32."""
+    import cv2
+
+    mask = np.zeros(image.shape[:2], np.uint8)
+    for a in (36, 42):
+        cv2.fillPoly(mask, [np.round(lm[a:a + 6]).astype(np.int32)], 255)
+    r = max(2, round(face_width(lm) / 60))
+    mask = cv2.dilate(mask, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    return cv2.inpaint(np.ascontiguousarray(image), mask, 2 * r, cv2.INPAINT_TELEA).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -309,5 +364,5 @@ def synthetic_sequence(n_frames: int = 40, size: tuple[int, int] = (192, 192), f
         raise InputError(f"face: expected 'cartoon' or 'astronaut', found {face!r}")
     anim = WarpAnimation(img, lm, motion)
     frames = np.stack([anim.frame(t) for t in range(n_frames)])
-    lms = np.stack([anim.points(t, lm) for t in range(n_frames)])
+    lms = np.stack([anim.points(t, lm + anim.lid_shift(t)) for t in range(n_frames)])
     return SyntheticSequence(frames, lms, anim)

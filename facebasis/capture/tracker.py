@@ -19,6 +19,7 @@ import numpy as np
 from facebasis.errors import InputError, parameter_error
 
 from .facemesh import FaceMesh, build_face_mesh
+from .eyelids import eyelid_model
 from .harmonic import HarmonicDeformer
 from .inputs import CaptureResult, check_capture_args
 from .landmarks import (
@@ -113,14 +114,14 @@ class FaceTracker:
         self.windows = lk_windows(lm, options.windows)
         self._maxwin = tuple(int(x) for x in self.windows.max(0))
         self.harmonic = HarmonicDeformer(self.mesh.vertices, self.mesh.faces, np.arange(L))  # eq. 9, factored once
-        held = np.zeros(len(self.mesh.vertices), bool)
-        held[:L] = True
+        held = np.arange(len(self.mesh.vertices)) < L
         self.refiner = MeshRefiner(self.mesh.vertices, self.mesh.faces, held, self.mesh.spacing, options.mesh,
                                    size=face_width(lm) / REFERENCE_FACE_WIDTH)
         self._inner, self._partner = lip_partners(L) if options.inner_lips != "track" else (np.zeros(0, np.int64),) * 2
         self._outer0 = lm[48:60].copy() if len(self._inner) else None    # outer lip of frame 0
         self._offset = lm[self._inner] - lm[self._partner]              # lip thickness, frame 0's axes
         self.filter = CondensationFilter(gray, lm, self.scale, options.filter) if options.use_filter else None
+        self._lids = eyelid_model(gray, lm, self.scale, options)    # lids in the eye-corner frame
         self._pyr = build_pyramid(gray8, self._maxwin, options.lk_levels)
         self._prep = prepare_image(gray, options.mesh.blur * self.scale)
         self._lm = lm.copy()
@@ -267,7 +268,7 @@ class FaceTracker:
         lost = np.asarray(lost, bool).copy()
         seen = self._lip_seen() if self.opt.inner_lips == "auto" else None
         lost[self._inner] = lost[self._partner] if seen is None else np.where(seen, lost[self._inner], lost[self._partner])
-        lm = self._follow_lips(lm, detections, seen)
+        lm = self._lids.follow(self._follow_lips(lm, detections, seen), detections, self.filter, gray)
         lm, lost = self._repair_outliers(lm, lost)
         self._lost_prev = lost.copy()
         lm = np.clip(lm, 0, [self.size[0] - 1, self.size[1] - 1])

@@ -65,6 +65,14 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "correction aligns first-frame patches on; default 0.5: sharp enough that patches do not "
                         "slide along lip lines and eyelids on clean footage; strongly compressed webcam video may "
                         "track better with more (1.5 was the former value)")
+    p.add_argument("--detected-lids", default=None, action=Once, metavar="G",
+                   help="with --detector: weight in [0, 1] of each frame's detected eyelids, placed on the tracked "
+                        "eye corners and averaged over time (z += G (z_detected - z)); default 0.7; 1 = the "
+                        "detector's lids as they are (jitter included), 0 = the lids as without a detector")
+    p.add_argument("--no-lid-search", action="store_true",
+                   help="without a detection, track the eyelid points as the other points (they slide along the "
+                        "lid line and miss blinks) instead of searching each lid across the eye for its "
+                        "first-frame look")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     p.set_defaults(func=cmd_capture, outputs=Outputs(writes=(("out", "folder", "--out"),), reads=("input", "landmarks")))
     register_landmarks(subparsers)
@@ -96,6 +104,14 @@ def cmd_capture(args) -> int:
             drift_blur = float("nan")
         if not (drift_blur >= 0 and drift_blur != float("inf")):
             raise InputError(f"--drift-blur: expected a number of pixels >= 0, found {args.drift_blur!r}")
+    lids = TrackerOptions.detected_lids
+    if args.detected_lids is not None:
+        try:
+            lids = float(args.detected_lids)
+        except ValueError:
+            lids = float("nan")
+        if not 0 <= lids <= 1:
+            raise InputError(f"--detected-lids: expected a number in [0, 1], found {args.detected_lids!r}")
     max_frames = (None if args.max_frames is None
                   else _int_option(args.max_frames, "--max-frames", 1, "a positive integer"))
     src, lm, det = check_capture_args(args.input, args.landmarks, args.detector, args.out, max_frames, args.fps)
@@ -111,7 +127,8 @@ def cmd_capture(args) -> int:
             warnings.simplefilter("always", VideoWarning)
             res = capture(src, landmarks=lm, detector=det, out=args.out, max_frames=max_frames,
                           overlay=not args.no_overlay, progress=progress,
-                          options=TrackerOptions(inner_lips=args.inner_lips, drift_blur=drift_blur))
+                          options=TrackerOptions(inner_lips=args.inner_lips, drift_blur=drift_blur,
+                                                 detected_lids=lids, lid_search=not args.no_lid_search))
     finally:
         if bar is not None:
             bar.close()

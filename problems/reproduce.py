@@ -228,8 +228,9 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
            "sockets, holes) set by the modes plus the seen detail's extension in 3D (the default; eq. U1 of "
            "geometry/unseen.py), seeds 0 and 1, persons with detail outside the identity space and in it; baseline: "
-           "registration-rig-regions24 (same code, --unseen off) and unseen_off_seed1 (seed 1 detail)",
-           tuple(f"registration/{d}/{f}" for d in ("unseen_detail", "unseen_inspace", "unseen_off_seed1")
+           "registration-rig-regions24 (same code, --unseen off) and unseen_off_seed1 (seed 1 detail); unseen_detail300: "
+           "the detail field in 300 eigenfunctions instead of 150",
+           tuple(f"registration/{d}/{f}" for d in ("unseen_detail", "unseen_inspace", "unseen_off_seed1", "unseen_detail300")
                  for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_detail",
@@ -237,7 +238,10 @@ RECIPES: tuple[Recipe, ...] = (
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_inspace",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons detail --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --unseen off "
-            "--out reports/registration/unseen_off_seed1"),
+            "--out reports/registration/unseen_off_seed1",
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --detail-modes 300 "
+            "--out reports/registration/unseen_detail300"),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",

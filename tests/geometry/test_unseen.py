@@ -91,6 +91,9 @@ def test_extension_recovers_a_smooth_offset_and_falls_back_to_the_base_far_from_
     # the Gaussian kernel's tail: 6 lengths from any seen vertex the offset is ~exp(-18) of the data's: the base
     deep = V[:, 0] > 2.5 + 6.0
     assert np.abs(Y[deep] - V[deep]).max() < 1e-3 * f.max()
+    # a noise-free scan (nugget 0): the floor keeps the solve finite, the same offsets
+    Z = extend_normal_offset(X, V, normals, seen, unseen | far, length=1.0, noise_ratio=0.0)
+    assert np.all(np.isfinite(Z)) and np.allclose(Z, Y)
     # nothing unseen, or nothing seen: the mesh itself
     assert extend_normal_offset(X, V, normals, seen, np.zeros(len(V), bool), 1.0, 1e-3) is X
     assert extend_normal_offset(X, V, normals, np.zeros(len(V), bool), unseen, 1.0, 1e-3) is X

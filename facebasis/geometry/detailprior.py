@@ -65,7 +65,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
 from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
 
@@ -121,7 +121,7 @@ class DetailPriorOptions:
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
-            raise InputError(f"detail.modes: expected an integer >= 0, found {self.modes!r}")
+            raise parameter_error("detail_modes", "an integer >= 0", repr(self.modes), label="detail.modes")
         for k in ("length", "amplitude"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):

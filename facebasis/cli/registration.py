@@ -85,7 +85,8 @@ def register(subparsers) -> None:
     p.add_argument("--detail-modes", default=None, type=int, action=Once, metavar="N",
                    help="eigenfunctions of the template's Laplace-Beltrami operator carrying the detail field (default "
                         "150; more take more of a person's detail outside the identity space: 300 on ICT persons with "
-                        "such detail, registered neutral 0.046 -> 0.039 cm RMS, for 7 s CPU more once per template)")
+                        "such detail, registered neutral 0.046 -> 0.039 cm RMS, for 7 s CPU more once per template, "
+                        "but one jawOpen scan of the benchmark then failed, 2.8 cm p95: not the default)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -137,7 +137,7 @@ def heldout_scanned(rig, pp, pairs, vertices: np.ndarray) -> float:
 
 def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after_model: str = "nricp",
                regions: int = 0, attribution: bool = False,
-               detail_modes: int = DETAIL_MODES, noise_prior: bool = True) -> tuple[dict, list]:
+               detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True) -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -157,12 +157,14 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
         method = f"modes {fit_modes}" + ("" if after_model == "nricp" else f" {after_model}") + (
             f" regions {regions}" if regions else "") + (
             "" if detail_modes == DETAIL_MODES else f", detail prior {detail_modes}" if detail_modes else ", no detail prior") + (
-            "" if noise_prior or not detail_modes else ", fixed prior")
+            "" if noise_prior or not detail_modes else ", fixed prior") + (
+            "" if unseen or not detail_modes else ", unseen as fitted")
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
     opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions),
-                               detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior))
+                               detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior,
+                                                                 unseen=unseen))
     reg = Registration(T, F, opts, name="ICT neutral", identity=ident, expressions=expr)
     singles = [truth_rig.evaluate(np.eye(len(names))[[names.index(s)]])[0] for s in SINGLES]
     shapes = [("neutral", B0), *zip(p.example_names, p.examples), *zip(SINGLES, singles)]
@@ -300,6 +302,10 @@ def main(argv=None):
     ap.add_argument("--noise-prior", nargs="+", choices=("on", "off"), default=["on"],
                     help="DetailPriorOptions.noise_prior (the joint identity fit continued with the prior at the noise "
                          "level, eq. D2 of geometry/detailprior.py; off: the fixed prior); one method per value")
+    ap.add_argument("--unseen", nargs="+", choices=("on", "off"), default=["on"],
+                    help="DetailPriorOptions.unseen (the neutral's vertices without scan surface: the modes plus the "
+                         "seen detail's extension, eq. U1 of geometry/unseen.py; off: as the fit and the normal stage "
+                         "left them); one method per value")
     ap.add_argument("--out", default="reports/registration")
     ap.add_argument("--table-only", action="store_true", help="only rewrite rig.md from the CSV files")
     args = ap.parse_args(argv)
@@ -312,12 +318,14 @@ def main(argv=None):
     for seed in args.seeds:
         for kind in args.persons:
             pp = person(seed, args.train, kind == "detail")
-            methods = [(None, "nricp", 0, DETAIL_MODES, True)] * (not args.no_baseline) + [
-                (k, a, r, m, n == "on") for k in args.fit_modes for a in args.after_model for r in args.regions
-                for m in args.detail_modes for n in dict.fromkeys(args.noise_prior if m else ["on"])]
-            for k, a, r, m, n in methods:
+            methods = [(None, "nricp", 0, DETAIL_MODES, True, True)] * (not args.no_baseline) + [
+                (k, a, r, m, n == "on", u == "on") for k in args.fit_modes for a in args.after_model
+                for r in args.regions for m in args.detail_modes
+                for n in dict.fromkeys(args.noise_prior if m else ["on"])
+                for u in dict.fromkeys(args.unseen if m else ["on"])]
+            for k, a, r, m, n, u in methods:
                 row, rows = run_method(pp, k, seed, kind, after_model=a, regions=r, attribution=args.attribution,
-                                       detail_modes=m, noise_prior=n)
+                                       detail_modes=m, noise_prior=n, unseen=u)
                 summary.append(row)
                 scans += rows
                 _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept

@@ -161,12 +161,12 @@ RECIPES: tuple[Recipe, ...] = (
            ("registration/normal_stage/rig.csv", "registration/normal_stage/rig.md",
             "registration/normal_stage/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --after-model normal "
-            "--noise-prior off --out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
+            "--noise-prior off --unseen off --out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1", "The normal stage after the fits on a second person (seed 1, 100 and 60 modes)",
            ("registration/normal_stage_seed1/rig.csv", "registration/normal_stage_seed1/rig.md",
             "registration/normal_stage_seed1/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --fit-modes 100 60 "
-            "--after-model normal --noise-prior off --out reports/registration/normal_stage_seed1",), data=("ict",),
+            "--after-model normal --noise-prior off --unseen off --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
            "in-space person, seed 0; per-part errors in the rig's frame",
@@ -199,7 +199,7 @@ RECIPES: tuple[Recipe, ...] = (
            tuple(f"registration/defaults_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --train 12 --no-baseline "
                  f"--fit-modes 100 --after-model nricp normal --regions 12 --noise-prior off "
-                 f"--out reports/registration/defaults_seed{s}"
+                 f"--unseen off --out reports/registration/defaults_seed{s}"
                  for s in (0, 1)), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-noise-prior", "The identity fit continued with the coefficients' prior at the noise "
            "level (the default; eq. D2 of geometry/detailprior.py), both persons, seeds 0 and 1, with the held-out "
@@ -207,23 +207,41 @@ RECIPES: tuple[Recipe, ...] = (
            ("registration/noise_prior/rig.csv", "registration/noise_prior/rig.md",
             "registration/noise_prior/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
-            "--after-model normal --regions 12 --attribution --out reports/registration/noise_prior",),
+            "--after-model normal --regions 12 --attribution --unseen off --out reports/registration/noise_prior",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-noise-prior-off", "The same with the fixed prior (--noise-prior off): the baseline "
            "beside registration-rig-noise-prior, with its held-out ratio on the scanned ranges",
            ("registration/noise_prior_off/rig.csv", "registration/noise_prior_off/rig.md",
             "registration/noise_prior_off/rig_scans.csv"),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --fit-modes 100 "
-            "--after-model normal --regions 12 --noise-prior off --out reports/registration/noise_prior_off",),
+            "--after-model normal --regions 12 --noise-prior off --unseen off --out reports/registration/noise_prior_off",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions24", "24 expression regions (the default since issue #27's jawOpen p95: 12 "
            "regions could not follow the person's strength field at the chin and lips), seed 0 both persons, seed 1 "
            "in-space; baseline: registration-rig-noise-prior (12 regions, same code otherwise)",
            tuple(f"registration/regions24_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons in-space detail --train 12 "
-            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/regions24_seed0",
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed0",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --train 12 "
-            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/regions24_seed1"),
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed1"),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
+           "sockets, holes) set by the modes plus the seen detail's extension in 3D (the default; eq. U1 of "
+           "geometry/unseen.py), seeds 0 and 1, persons with detail outside the identity space and in it; baseline: "
+           "registration-rig-regions24 (same code, --unseen off) and unseen_off_seed1 (seed 1 detail); unseen_detail300: "
+           "the detail field in 300 eigenfunctions instead of 150",
+           tuple(f"registration/{d}/{f}" for d in ("unseen_detail", "unseen_inspace", "unseen_off_seed1", "unseen_detail300")
+                 for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_detail",
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons in-space --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_inspace",
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --unseen off "
+            "--out reports/registration/unseen_off_seed1",
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 24 --detail-modes 300 "
+            "--out reports/registration/unseen_detail300"),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",

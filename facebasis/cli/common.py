@@ -18,7 +18,7 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "head": "--head", "ridge": "--ridge", "identity": "--identity", "first_frame_neutral": "--first-frame-neutral",
          "region": "--region", "max_frames": "--max-frames", "fps": "--fps", "identity_basis": "--identity-basis",
          "expression_basis": "--expression-basis", "expression_transfer": "--expression-transfer",
-         "amplitude": "--amplitude", "expression_regions": "--expression-regions",
+         "amplitude": "--amplitude", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
          "rest_anchor": "--rest-anchor", "focal": "--focal", "centre": "--focal", "noise_model": "--noise-model"}
 
 #: a command whose flag for a library parameter is not :data:`FLAGS`'s (``landmarks``' ``--frame`` is

@@ -65,7 +65,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import InputError
+from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
 from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
 
@@ -106,22 +106,32 @@ class DetailPriorOptions:
         level of that fit's residual (eq. D2, :func:`noise_prior`). False: the fixed prior, the joint fit
         from the template (the previous pipeline). No effect with ``modes == 0`` (no field to take what
         the modes cannot express, which a weak prior would hand to the modes)
+    unseen : after the normal stage, the vertices without scan surface (the sockets, holes) get the fit's
+        modes plus the seen detail's extension in 3D (:mod:`.unseen`, eq. U1). False: what the field's
+        eigenfunctions and the normal stage put there (the previous pipeline)
+    unseen_samples : at most this many seen vertices condition that extension (a seeded sample)
     """
 
     modes: int = 150
     length: float = 0.04
     amplitude: float = 2.0
     noise_prior: bool = True
+    unseen: bool = True
+    unseen_samples: int = 2000
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
-            raise InputError(f"detail.modes: expected an integer >= 0, found {self.modes!r}")
+            raise parameter_error("detail_modes", "an integer >= 0", repr(self.modes), label="detail.modes")
         for k in ("length", "amplitude"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
                 raise InputError(f"detail.{k}: expected a positive number, found {v!r}")
-        if not isinstance(self.noise_prior, (bool, np.bool_)):
-            raise InputError(f"detail.noise_prior: expected True or False, found {self.noise_prior!r}")
+        for k in ("noise_prior", "unseen"):
+            if not isinstance(getattr(self, k), (bool, np.bool_)):
+                raise InputError(f"detail.{k}: expected True or False, found {getattr(self, k)!r}")
+        u = self.unseen_samples
+        if isinstance(u, bool) or not (isinstance(u, (int, np.integer)) and u >= 1):
+            raise InputError(f"detail.unseen_samples: expected an integer >= 1, found {u!r}")
 
 
 class DetailPrior:
@@ -201,7 +211,7 @@ def fit_with_detail(plain: ModelFit, prior: DetailPrior, base: np.ndarray, delta
     fit = fit_shape_model(base, np.concatenate([deltas, prior.fields]), surface, normals_of, h, options, sigma=sigma,
                           c0=c0, pose0=pose0)
     return ModelFit(fit.vertices, fit.coefficients[:K], fit.pose, fit.rms, fit.pairs,
-                    plain.iterations + fit.iterations)
+                    plain.iterations + fit.iterations, float(s))
 
 
 def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: float) -> ModelFit:
@@ -233,7 +243,7 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         return fit
     X = fit.pose.apply(P + (fit.coefficients @ D.reshape(len(D), -1)).reshape(P.shape))
     X[reg.skin] = fit.vertices
-    return ModelFit(X, fit.coefficients, fit.pose, fit.rms, fit.pairs, fit.iterations)
+    return ModelFit(X, fit.coefficients, fit.pose, fit.rms, fit.pairs, fit.iterations, fit.detail_sd)
 
 
 __all__ = ["DetailPrior", "DetailPriorOptions", "NOISE_PRIOR_FLOOR", "fit_with_detail", "identity_fit_with_detail",

@@ -42,6 +42,7 @@ from .detailprior import DetailPriorOptions, identity_fit_with_detail
 from .normalstage import NormalStageOptions, normal_displacement
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
+from .unseen import extend_unseen
 
 #: A scan whose size (bounding-box diagonal) differs from the template's by more than this factor
 #: (either way) is refused as being in other units.
@@ -375,6 +376,7 @@ class Registration:
             opts = dataclasses.replace(opts, landmark_weight=tuple(self.options.auto_landmark_weight * w
                                                                    for w in opts.landmark_weight))
         res = self._refine(P, surface_t, opts, lm_idx, lm_t, h, model is not None)
+        res = extend_unseen(self, model, res, surface_t, kind == "identity")  # the sockets, holes: eq. U1
         Xt = res.vertices
         if self.skin is not None:  # the other parts have no scan surface: keep them where the fit put them
             Xt = P.copy()
@@ -388,10 +390,8 @@ class Registration:
     def _refine(self, P, surface_t, opts, lm_idx, lm_t, h, after_model: bool):
         """The last stage: non-rigid ICP, or after a model fit the stage ``options.after_model``."""
         how = self.options.after_model if after_model else "nricp"
-        res = None
-        if how != "normal":
-            res = (self._skin_fit(P, surface_t, opts, lm_idx, lm_t, h) if after_model and self.skin is not None
-                   else self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h))
+        res = None if how == "normal" else (self._skin_fit(P, surface_t, opts, lm_idx, lm_t, h) if after_model and
+                                            self.skin is not None else self.nricp.fit(P, surface_t, opts, lm_idx, lm_t, h=h))
         if how == "nricp":
             return res
         R = P if res is None else res.vertices

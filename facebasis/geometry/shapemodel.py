@@ -169,6 +169,8 @@ class ModelFit:
     rms : final RMS point-to-plane residual of the kept pairs
     pairs : how many pairs were kept in the last round
     iterations : rounds run
+    detail_sd : the pointwise deviation ``s`` of the detail field fitted beside the modes (eq. D1 of
+        :mod:`.detailprior`; 0: none)
     """
 
     vertices: np.ndarray
@@ -177,6 +179,7 @@ class ModelFit:
     rms: float
     pairs: int
     iterations: int
+    detail_sd: float = 0.0
 
 
 def _pairs(X, normals, surface, dmax, cos_max, use, floor):

@@ -188,3 +188,29 @@ def test_cli_detail_prior_on_and_off_register_through_the_identity_basis(tmp_pat
         assert rep["residual"]["median"] < 0.01
     # the modes-only fit takes part of the field into the coefficients (measured 0.25); with the prior 0.13
     assert cerr["on"] < 0.7 * cerr["off"] and cerr["on"] < 0.2
+
+
+def test_cli_detail_modes_bad_values_repeat_and_without_the_prior(tmp_path, capsys):
+    out = tmp_path / "o"
+    base = ["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out)]
+    assert main(base + ["--detail-modes", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "error: --detail-modes: expected an integer >= 0, found -1" in err and err.count("\n") == 1
+    parser_refuses(main, base + ["--detail-modes", "many"], capsys, "--detail-modes")
+    parser_refuses(main, base + ["--detail-modes", "200", "--detail-modes", "300"], capsys, "--detail-modes")
+    assert main(base + ["--detail-modes", "300", "--detail-prior", "off", "--identity-prior", "fixed"]) == 2
+    err = capsys.readouterr().err
+    assert "--detail-modes 300: expected together with --detail-prior on" in err and "found --detail-prior off" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("given, modes", [([], 150), (["--detail-modes", "300"], 300), (["--detail-modes", "0"], 0)])
+def test_cli_detail_modes_reach_the_registration(tmp_path, monkeypatch, given, modes):
+    import facebasis.geometry.registerfiles as rf
+
+    seen = {}
+    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
+    assert main(["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out",
+                 str(tmp_path / "o"), *given]) == 0
+    assert seen["opts"].detail == DetailPriorOptions(modes=modes)
+    assert DetailPriorOptions().modes == 150 and DetailPriorOptions().unseen is True  # the CLI's default is the library's

@@ -186,9 +186,8 @@ def fit_regional_expressions(whole: ModelFit, expressions: np.ndarray, regions: 
     if not len(act):
         return whole, W
     rot = whole.pose.scale * whole.pose.rotation
-    # basis phi_r E_k of the active expressions, in the surface's frame: (len(act) * R, n, 3)
-    D = (regions[None, :, :, None] * expressions[act][:, None]) @ rot.T
-    D = D.reshape(len(act) * R, *expressions.shape[1:])
+    # basis phi_r E_k of the active expressions, in the surface's frame, never built: (len(act) * R) columns
+    D = RegionalBasis(expressions[act] @ rot.T, np.asarray(regions, float))
     lo = np.repeat(-w[act], R)
     hi = np.repeat(upper - w[act], R)
     fit = fit_shape_model(whole.vertices, D, surface, normals_of, h, options.fit, sigma=options.sigma,
@@ -196,3 +195,36 @@ def fit_regional_expressions(whole: ModelFit, expressions: np.ndarray, regions: 
     W[act] += fit.coefficients.reshape(len(act), R)
     out = ModelFit(fit.vertices, w, whole.pose.then(fit.pose), fit.rms, fit.pairs, whole.iterations + fit.iterations)
     return out, W
+
+
+class RegionalBasis:
+    """The regional basis of eq. X1, ``D_(k,r),i = phi_r(i) E_k,i`` for K expressions and R regions, held
+    as its two factors instead of its ``K R`` meshes (:func:`.shapemodel.fit_shape_model` takes it for an
+    array ``(K R, n, 3)``, column ``k R + r``).
+
+    The dense basis was ``K R n`` 3-vectors (ICT, 22 active expressions x 48 regions x 14062 vertices:
+    350 MB, built per scan) and every round gathered its sampled rows; here a combination is one
+    ``(K, R) @ (R, n)`` product and the Jacobian's rows ``a_ik phi_r(i)`` (``a_ik = E_k,i . n_i``) an
+    outer product per sampled vertex: ``O(K (R + 3) n)`` and ``O(p K R)``, the latter the size of the
+    Jacobian itself.
+
+    Parameters
+    ----------
+    expressions : (K, n, 3) ``E_k`` (in the frame of the fit's base mesh)
+    regions : (R, n) ``phi_r`` (:func:`soft_regions`)
+    """
+
+    def __init__(self, expressions: np.ndarray, regions: np.ndarray):
+        self.expressions, self.regions = expressions, regions
+        K, n = expressions.shape[:2]
+        self.shape = (K * len(regions), n, 3)
+
+    def combine(self, c: np.ndarray) -> np.ndarray:
+        """``sum_kr c_kr phi_r E_k`` (n, 3) for c (K R,)."""
+        Wv = c.reshape(len(self.expressions), len(self.regions)) @ self.regions  # (K, n) per-vertex weights
+        return np.einsum("kn,knj->nj", Wv, self.expressions)
+
+    def normal_jacobian(self, idx: np.ndarray, RN: np.ndarray) -> np.ndarray:
+        """``(p, K R)``: ``phi_r(idx_i) E_k,idx_i . RN_i``."""
+        a = np.einsum("kpj,pj->pk", self.expressions[:, idx, :], RN)
+        return (a[:, :, None] * self.regions[:, idx].T[:, None, :]).reshape(len(idx), -1)

@@ -225,6 +225,15 @@ RECIPES: tuple[Recipe, ...] = (
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --out reports/registration/regions24_seed1"),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions-factored", "24 vs 48 expression regions with the factored regional basis and "
+           "the DAQP bounded step (same minimiser as before, faster), seeds 0 and 1, both persons; baseline: "
+           "registration-rig-regions24 (24 regions, the dense basis and BVLS)",
+           tuple(f"registration/regions_factored_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
+                                                                                        "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons in-space detail "
+                 f"--train 12 --no-baseline --fit-modes 100 --after-model normal --regions 24 48 "
+                 f"--out reports/registration/regions_factored_seed{s}" for s in (0, 1)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

@@ -189,13 +189,13 @@ def _pairs(X, normals, surface, dmax, cos_max, use, floor):
     return use[ok], U[ok], N[ok]
 
 
-def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None) -> np.ndarray:
     """``argmin ||A x - b||`` within ``lb <= x <= ub``, through the small normal matrix ``H = A^T A`` (q, q):
-    unbounded, its Cholesky solve; bounded, the box QP ``min 1/2 x^T H x - (A^T b)^T x`` by DAQP (Arnström,
-    Bemporad & Axehill 2022, an exact dual active-set method; the package's box QP solver, see
-    :mod:`facebasis.rigging.boxqp`). The same minimiser as a bounded least squares on ``A`` (BVLS), which
-    solved a dense (q, q) least squares per active-set change: with the regional expression stage's
-    several hundred unknowns (:mod:`.expressionregions`) it was most of an expression scan's time."""
+    unbounded, its Cholesky solve; bounded, the box QP ``min 1/2 x^T H x - (A^T b)^T x`` (:func:`box_qp`;
+    ``start``: its guess of the active bounds). The same minimiser as a bounded least squares on ``A``
+    (BVLS, used before), which solved a dense (q, q) least squares per active-set change: with the
+    regional expression stage's several hundred unknowns (:mod:`.expressionregions`) that was most of
+    an expression scan's time."""
     from scipy.linalg import cho_factor, cho_solve
 
     H = A.T @ A
@@ -203,18 +203,62 @@ def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.n
     g = A.T @ b
     if np.all(np.isinf(lb)) and np.all(np.isinf(ub)):
         return cho_solve(cho_factor(H), g)
-    return box_qp(H, g, lb, ub)
+    return box_qp(H, g, lb, ub, start)
 
 
-def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None, pivots: int = 25) -> np.ndarray:
     """``argmin 1/2 x^T H x - g^T x`` within ``lb <= x <= ub`` (H (q, q) positive definite; infinite bounds
-    allowed) by DAQP, clipped into the bounds.
+    allowed), exactly.
+
+    Block principal pivoting (Judice & Pires 1994, for bounds: Portugal, Judice & Vicente 1994): guess
+    which bounds hold, solve the free unknowns with the others on their bounds (one LAPACK Cholesky of
+    the free block), move every free unknown outside its bounds onto them and release every bound whose
+    multiplier has the wrong sign; stop when none does (the KKT conditions hold, so this is the unique
+    minimiser). A guess from the previous Gauss-Newton step (``start``) settles in one or two solves. Full
+    exchanges may cycle: after ``pivots`` solves, or a singular block, DAQP (Arnström, Bemporad & Axehill
+    2022, an exact dual active-set method; the package's other box QP solver, :mod:`facebasis.rigging.boxqp`)
+    solves it instead.
+
+    Parameters
+    ----------
+    H : (q, q); g : (q,); lb, ub : (q,) bounds (infinite: free)
+    start : ``(at_lower, at_upper)`` boolean (q,) guesses, or None (the bounds the unbounded minimiser violates)
+    pivots : block pivots before DAQP takes over
 
     Raises
     ------
     SolverError
         DAQP reports no optimum (its exit flag is the status)
     """
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    tol = 1e-11 * max(1.0, float(np.abs(g).max()))
+    try:
+        if start is None:
+            x = cho_solve(cho_factor(H), g)
+            lo, hi = x < lb, x > ub
+        else:
+            lo, hi = start[0] & np.isfinite(lb), start[1] & ~start[0] & np.isfinite(ub)
+        for _ in range(pivots):
+            free = ~(lo | hi)
+            x = np.where(lo, lb, np.where(hi, ub, 0.0))
+            if free.any():
+                fixed = np.flatnonzero(~free)
+                f = np.flatnonzero(free)
+                x[f] = cho_solve(cho_factor(H[np.ix_(f, f)]), g[f] - H[np.ix_(f, fixed)] @ x[fixed])
+            grad = H @ x - g  # the bounds' multipliers: >= 0 at a lower bound, <= 0 at an upper one
+            out_lo, out_hi = free & (x < lb), free & (x > ub)
+            wrong_lo, wrong_hi = lo & (grad < -tol), hi & (grad > tol)
+            if not (out_lo.any() or out_hi.any() or wrong_lo.any() or wrong_hi.any()):
+                return x
+            lo, hi = (lo & ~wrong_lo) | out_lo, (hi & ~wrong_hi) | out_hi
+    except LinAlgError:
+        pass
+    return _daqp(H, g, lb, ub)
+
+
+def _daqp(H, g, lb, ub) -> np.ndarray:
+    """:func:`box_qp` by DAQP, clipped into the bounds."""
     import daqp
 
     q = len(g)
@@ -305,7 +349,9 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         b = np.concatenate([-w * r0, -lam * c])
         lb = np.concatenate([np.full(npose, -np.inf), lo - c])
         ub = np.concatenate([np.full(npose, np.inf), hi - c])
-        dx = _solve(A, b, lb, ub)
+        # the bounds that held after the last step: the bounded step's first guess
+        start = (np.concatenate([np.zeros(npose, bool), c <= lo]), np.concatenate([np.zeros(npose, bool), c >= hi]))
+        dx = _solve(A, b, lb, ub, start if it > 1 else None)
         R = _rotation_from_vector(dx[:3])
         s = 1.0 + dx[6] if options.scale else 1.0
         pose = pose.then(Similarity(s, R, cen - s * R @ cen + dx[3:6]))

@@ -56,7 +56,11 @@ class RegionOptions:
         *along* the skin at the chin and lips after the regional fit, which no later stage sees; from the
         person's exact neutral still p95 0.146 cm), so the p95 of jawOpen was 0.13-0.18 cm depending on
         the neutral (seed 0: 0.134 with the fixed identity prior, 0.176 with the noise-level one):
-        with 24, 0.094 cm; about 1-4 s CPU more per expression scan than 12
+        with 24, 0.094 cm. Cost (reports/registration/regions_factored_seed*, the basis held as its factors
+        and the exact bounded step of :func:`.shapemodel.box_qp`): expression scans 3.5-4.2 s CPU median with
+        24, 4.6-6.5 with 48 (jawOpen 7.9-11.1 s: the Gauss-Newton normal matrix grows as (K R)^2); 48
+        lowered the worst p95 only where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03
+        0.167 -> 0.133) and breaks 10 s per scan under load, so the default stays 24
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex

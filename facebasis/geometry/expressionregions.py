@@ -58,9 +58,11 @@ class RegionOptions:
         the neutral (seed 0: 0.134 with the fixed identity prior, 0.176 with the noise-level one):
         with 24, 0.094 cm. Cost (reports/registration/regions_factored_seed*, the basis held as its factors
         and the exact bounded step of :func:`.shapemodel.box_qp`): expression scans 3.5-4.2 s CPU median with
-        24, 4.6-6.5 with 48 (jawOpen 7.9-11.1 s: the Gauss-Newton normal matrix grows as (K R)^2); 48
-        lowered the worst p95 only where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03
-        0.167 -> 0.133) and breaks 10 s per scan under load, so the default stays 24
+        24, 4.6-6.5 with 48 (jawOpen 7.9-11.1 s with DAQP as the bounded step, 6.4-7.3 s with the
+        pivoting step; the Gauss-Newton normal matrix grows as (K R)^2); 48 lowered the worst p95 only
+        where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03 0.167 -> 0.133, seed 1 detail
+        ex03 0.187 -> 0.164), held-out ratios unchanged; the default stays 24 until a whole bench with
+        the pivoting step confirms 48's time (the table's 48-region run had the slower step)
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex

@@ -61,8 +61,9 @@ class RegionOptions:
         24, 4.6-6.5 with 48 (jawOpen 7.9-11.1 s with DAQP as the bounded step, 6.4-7.3 s with the
         pivoting step; the Gauss-Newton normal matrix grows as (K R)^2); 48 lowered the worst p95 only
         where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03 0.167 -> 0.133, seed 1 detail
-        ex03 0.187 -> 0.164), held-out ratios unchanged; the default stays 24 until a whole bench with
-        the pivoting step confirms 48's time (the table's 48-region run had the slower step)
+        ex03 0.187 -> 0.164), held-out ratios unchanged; with the pivoting step 48 costs 4.2-5.0 s CPU
+        median, max 7.3 per expression scan (reports/registration/regions48_pivot_seed*, load 14-22): the
+        candidate for the next default
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex

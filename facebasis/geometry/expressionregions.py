@@ -48,7 +48,7 @@ class RegionOptions:
 
     Attributes
     ----------
-    count : number of soft regions (default 24); 0: whole expressions only, no regional stage. ICT persons
+    count : number of soft regions (default 48); 0: whole expressions only, no regional stage. ICT persons
         of ``problems.bench_registration_rig`` (reports/registration/regions*): every scan's p95 <= 0.18 cm
         with 12 (0.235-0.237 with whole expressions), held-out ratio unchanged, about 1 s CPU more per scan.
         24 (reports/registration/regions24_seed*): a person's expression strength varies at a finer scale
@@ -62,8 +62,8 @@ class RegionOptions:
         pivoting step; the Gauss-Newton normal matrix grows as (K R)^2); 48 lowered the worst p95 only
         where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03 0.167 -> 0.133, seed 1 detail
         ex03 0.187 -> 0.164), held-out ratios unchanged; with the pivoting step 48 costs 4.2-5.0 s CPU
-        median, max 7.3 per expression scan (reports/registration/regions48_pivot_seed*, load 14-22): the
-        candidate for the next default
+        median, max 7.3 per expression scan (reports/registration/regions48_pivot_seed*, load 14-22), within
+        10 s, and it buys p95 margin on the scans near the limit: the default since then
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex
@@ -72,7 +72,7 @@ class RegionOptions:
     fit : the closest-point / Gauss-Newton loop's options (prior ``mu``, iterations, ...)
     """
 
-    count: int = 24
+    count: int = 48
     width: float = 0.6
     support: float = 0.05
     active: float = 0.02

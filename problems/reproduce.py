@@ -243,6 +243,24 @@ RECIPES: tuple[Recipe, ...] = (
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --detail-modes 300 "
             "--out reports/registration/unseen_detail300"),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions-factored", "24 vs 48 expression regions with the factored regional basis and "
+           "the DAQP bounded step (same minimiser as before, faster), seeds 0 and 1, both persons; baseline: "
+           "registration-rig-regions24 (24 regions, the dense basis and BVLS)",
+           tuple(f"registration/regions_factored_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
+                                                                                        "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons in-space detail "
+                 f"--train 12 --no-baseline --fit-modes 100 --after-model normal --regions 24 48 "
+                 f"--out reports/registration/regions_factored_seed{s}" for s in (0, 1)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-regions48-pivot", "48 expression regions with the final bounded step (block "
+           "principal pivoting), the two persons whose worst scan 48 regions improved most; baseline: "
+           "registration-rig-regions-factored (same minimiser, DAQP step)",
+           tuple(f"registration/regions48_pivot_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
+                                                                                      "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons {k} --train 12 "
+                 f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
+                 f"--out reports/registration/regions48_pivot_seed{s}" for s, k in ((0, "detail"), (1, "in-space"))),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

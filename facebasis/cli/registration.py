@@ -77,7 +77,7 @@ def register(subparsers) -> None:
     p.add_argument("--expression-regions", default=None, type=int, action=Once, metavar="N",
                    help="after the expression fit, one weight per expression in each of N soft regions placed over "
                         "the expressions' supports (a person's expression whose strength varies over the face, e.g. "
-                        "a jaw opening further on one side); default 24; 0: whole expressions only")
+                        "a jaw opening further on one side); default 48; 0: whole expressions only")
     p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
                    help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
                         "what the identity space cannot express is left to that field instead of sliding the "

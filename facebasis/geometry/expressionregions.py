@@ -48,7 +48,7 @@ class RegionOptions:
 
     Attributes
     ----------
-    count : number of soft regions (default 24); 0: whole expressions only, no regional stage. ICT persons
+    count : number of soft regions (default 48); 0: whole expressions only, no regional stage. ICT persons
         of ``problems.bench_registration_rig`` (reports/registration/regions*): every scan's p95 <= 0.18 cm
         with 12 (0.235-0.237 with whole expressions), held-out ratio unchanged, about 1 s CPU more per scan.
         24 (reports/registration/regions24_seed*): a person's expression strength varies at a finer scale
@@ -56,7 +56,14 @@ class RegionOptions:
         *along* the skin at the chin and lips after the regional fit, which no later stage sees; from the
         person's exact neutral still p95 0.146 cm), so the p95 of jawOpen was 0.13-0.18 cm depending on
         the neutral (seed 0: 0.134 with the fixed identity prior, 0.176 with the noise-level one):
-        with 24, 0.094 cm; about 1-4 s CPU more per expression scan than 12
+        with 24, 0.094 cm. Cost (reports/registration/regions_factored_seed*, the basis held as its factors
+        and the exact bounded step of :func:`.shapemodel.box_qp`): expression scans 3.5-4.2 s CPU median with
+        24, 4.6-6.5 with 48 (jawOpen 7.9-11.1 s with DAQP as the bounded step, 6.4-7.3 s with the
+        pivoting step; the Gauss-Newton normal matrix grows as (K R)^2); 48 lowered the worst p95 only
+        where 24 left it (seed 0 detail jawOpen 0.183 -> 0.157, seed 1 ex03 0.167 -> 0.133, seed 1 detail
+        ex03 0.187 -> 0.164), held-out ratios unchanged; with the pivoting step 48 costs 4.2-5.0 s CPU
+        median, max 7.3 per expression scan (reports/registration/regions48_pivot_seed*, load 14-22), within
+        10 s, and it buys p95 margin on the scans near the limit: the default since then
     width : the Gaussian width of a region in units of the centres' median spacing
     support : the regions are placed over the vertices whose largest expression motion is above this
         fraction of the largest motion of any vertex
@@ -65,7 +72,7 @@ class RegionOptions:
     fit : the closest-point / Gauss-Newton loop's options (prior ``mu``, iterations, ...)
     """
 
-    count: int = 24
+    count: int = 48
     width: float = 0.6
     support: float = 0.05
     active: float = 0.02
@@ -186,9 +193,8 @@ def fit_regional_expressions(whole: ModelFit, expressions: np.ndarray, regions: 
     if not len(act):
         return whole, W
     rot = whole.pose.scale * whole.pose.rotation
-    # basis phi_r E_k of the active expressions, in the surface's frame: (len(act) * R, n, 3)
-    D = (regions[None, :, :, None] * expressions[act][:, None]) @ rot.T
-    D = D.reshape(len(act) * R, *expressions.shape[1:])
+    # basis phi_r E_k of the active expressions, in the surface's frame, never built: (len(act) * R) columns
+    D = RegionalBasis(expressions[act] @ rot.T, np.asarray(regions, float))
     lo = np.repeat(-w[act], R)
     hi = np.repeat(upper - w[act], R)
     fit = fit_shape_model(whole.vertices, D, surface, normals_of, h, options.fit, sigma=options.sigma,
@@ -196,3 +202,36 @@ def fit_regional_expressions(whole: ModelFit, expressions: np.ndarray, regions: 
     W[act] += fit.coefficients.reshape(len(act), R)
     out = ModelFit(fit.vertices, w, whole.pose.then(fit.pose), fit.rms, fit.pairs, whole.iterations + fit.iterations)
     return out, W
+
+
+class RegionalBasis:
+    """The regional basis of eq. X1, ``D_(k,r),i = phi_r(i) E_k,i`` for K expressions and R regions, held
+    as its two factors instead of its ``K R`` meshes (:func:`.shapemodel.fit_shape_model` takes it for an
+    array ``(K R, n, 3)``, column ``k R + r``).
+
+    The dense basis was ``K R n`` 3-vectors (ICT, 22 active expressions x 48 regions x 14062 vertices:
+    350 MB, built per scan) and every round gathered its sampled rows; here a combination is one
+    ``(K, R) @ (R, n)`` product and the Jacobian's rows ``a_ik phi_r(i)`` (``a_ik = E_k,i . n_i``) an
+    outer product per sampled vertex: ``O(K (R + 3) n)`` and ``O(p K R)``, the latter the size of the
+    Jacobian itself.
+
+    Parameters
+    ----------
+    expressions : (K, n, 3) ``E_k`` (in the frame of the fit's base mesh)
+    regions : (R, n) ``phi_r`` (:func:`soft_regions`)
+    """
+
+    def __init__(self, expressions: np.ndarray, regions: np.ndarray):
+        self.expressions, self.regions = expressions, regions
+        K, n = expressions.shape[:2]
+        self.shape = (K * len(regions), n, 3)
+
+    def combine(self, c: np.ndarray) -> np.ndarray:
+        """``sum_kr c_kr phi_r E_k`` (n, 3) for c (K R,)."""
+        Wv = c.reshape(len(self.expressions), len(self.regions)) @ self.regions  # (K, n) per-vertex weights
+        return np.einsum("kn,knj->nj", Wv, self.expressions)
+
+    def normal_jacobian(self, idx: np.ndarray, RN: np.ndarray) -> np.ndarray:
+        """``(p, K R)``: ``phi_r(idx_i) E_k,idx_i . RN_i``."""
+        a = np.einsum("kpj,pj->pk", self.expressions[:, idx, :], RN)
+        return (a[:, :, None] * self.regions[:, idx].T[:, None, :]).reshape(len(idx), -1)

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, named_params
+from ..errors import InputError, SolverError, named_params
 from .rigid import Similarity, _rotation_from_vector
 
 
@@ -192,19 +192,104 @@ def _pairs(X, normals, surface, dmax, cos_max, use, floor):
     return use[ok], U[ok], N[ok]
 
 
-def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
-    """``argmin ||A x - b||`` within ``lb <= x <= ub``, through the small normal matrix: with
-    ``A^T A = L L^T`` the problem is ``min ||L^T x - L^-1 A^T b||`` (same minimiser, (q, q) not (p, q))."""
-    from scipy.linalg import cho_factor, cho_solve, solve_triangular
-    from scipy.optimize import lsq_linear
+def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None) -> np.ndarray:
+    """``argmin ||A x - b||`` within ``lb <= x <= ub``, through the small normal matrix ``H = A^T A`` (q, q):
+    unbounded, its Cholesky solve; bounded, the box QP ``min 1/2 x^T H x - (A^T b)^T x`` (:func:`box_qp`;
+    ``start``: its guess of the active bounds). The same minimiser as a bounded least squares on ``A``
+    (BVLS, used before), which solved a dense (q, q) least squares per active-set change: with the
+    regional expression stage's several hundred unknowns (:mod:`.expressionregions`) that was most of
+    an expression scan's time."""
+    from scipy.linalg import cho_factor, cho_solve
 
     H = A.T @ A
     H += 1e-12 * np.trace(H) * np.eye(len(H))
     g = A.T @ b
     if np.all(np.isinf(lb)) and np.all(np.isinf(ub)):
         return cho_solve(cho_factor(H), g)
-    L = np.linalg.cholesky(H)
-    return lsq_linear(L.T, solve_triangular(L, g, lower=True), bounds=(lb, ub), method="bvls").x
+    return box_qp(H, g, lb, ub, start)
+
+
+def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None, pivots: int = 25) -> np.ndarray:
+    """``argmin 1/2 x^T H x - g^T x`` within ``lb <= x <= ub`` (H (q, q) positive definite; infinite bounds
+    allowed), exactly.
+
+    Block principal pivoting (Judice & Pires 1994, for bounds: Portugal, Judice & Vicente 1994): guess
+    which bounds hold, solve the free unknowns with the others on their bounds (one LAPACK Cholesky of
+    the free block), move every free unknown outside its bounds onto them and release every bound whose
+    multiplier has the wrong sign; stop when none does (the KKT conditions hold, so this is the unique
+    minimiser). A guess from the previous Gauss-Newton step (``start``) settles in one or two solves. Full
+    exchanges may cycle: after ``pivots`` solves, or a singular block, DAQP (Arnström, Bemporad & Axehill
+    2022, an exact dual active-set method; the package's other box QP solver, :mod:`facebasis.rigging.boxqp`)
+    solves it instead.
+
+    Parameters
+    ----------
+    H : (q, q); g : (q,); lb, ub : (q,) bounds (infinite: free)
+    start : ``(at_lower, at_upper)`` boolean (q,) guesses, or None (the bounds the unbounded minimiser violates)
+    pivots : block pivots before DAQP takes over
+
+    Raises
+    ------
+    SolverError
+        DAQP reports no optimum (its exit flag is the status)
+    """
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    tol = 1e-11 * max(1.0, float(np.abs(g).max()))
+    try:
+        if start is None:
+            x = cho_solve(cho_factor(H), g)
+            lo, hi = x < lb, x > ub
+        else:
+            lo, hi = start[0] & np.isfinite(lb), start[1] & ~start[0] & np.isfinite(ub)
+        for _ in range(pivots):
+            free = ~(lo | hi)
+            x = np.where(lo, lb, np.where(hi, ub, 0.0))
+            if free.any():
+                fixed = np.flatnonzero(~free)
+                f = np.flatnonzero(free)
+                x[f] = cho_solve(cho_factor(H[np.ix_(f, f)]), g[f] - H[np.ix_(f, fixed)] @ x[fixed])
+            grad = H @ x - g  # the bounds' multipliers: >= 0 at a lower bound, <= 0 at an upper one
+            out_lo, out_hi = free & (x < lb), free & (x > ub)
+            wrong_lo, wrong_hi = lo & (grad < -tol), hi & (grad > tol)
+            if not (out_lo.any() or out_hi.any() or wrong_lo.any() or wrong_hi.any()):
+                return x
+            lo, hi = (lo & ~wrong_lo) | out_lo, (hi & ~wrong_hi) | out_hi
+    except LinAlgError:
+        pass
+    return _daqp(H, g, lb, ub)
+
+
+def _daqp(H, g, lb, ub) -> np.ndarray:
+    """:func:`box_qp` by DAQP, clipped into the bounds."""
+    import daqp
+
+    q = len(g)
+    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), -np.ascontiguousarray(g, dtype=np.float64),
+                               np.zeros((0, q)), np.ascontiguousarray(ub, dtype=np.float64),
+                               np.ascontiguousarray(lb, dtype=np.float64), np.zeros(q, dtype=np.int32),
+                               primal_tol=1e-12, dual_tol=1e-12, eps_prox=-1.0)
+    if flag not in (1, 2):
+        raise SolverError(f"model fit: the bounded step's QP failed (DAQP exit flag {flag}, {q} unknowns)", str(flag))
+    return np.clip(np.asarray(x, np.float64), lb, ub)
+
+
+class DenseBasis:
+    """A shape basis held as its displacements ``(K, n, 3)`` (the default of :func:`fit_shape_model`; a
+    structured basis, e.g. :class:`.expressionregions.RegionalBasis`, offers the same three members)."""
+
+    def __init__(self, deltas: np.ndarray):
+        self.deltas = deltas
+        self.shape = deltas.shape
+        self._flat = deltas.reshape(len(deltas), -1)
+
+    def combine(self, c: np.ndarray) -> np.ndarray:
+        """``sum_k c_k D_k`` (n, 3)."""
+        return (c @ self._flat).reshape(self.shape[1:])
+
+    def normal_jacobian(self, idx: np.ndarray, RN: np.ndarray) -> np.ndarray:
+        """``(p, K)``: ``D_k,idx_i . RN_i`` (the Jacobian of the point-to-plane residuals in ``c``)."""
+        return np.einsum("kpj,pj->pk", self.deltas[:, idx, :], RN)
 
 
 def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h: float,
@@ -215,7 +300,8 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     Parameters
     ----------
     base : (n, 3) the model's mean (template or the person's neutral), roughly aligned to ``surface``
-    deltas : (K, n, 3) the basis
+    deltas : (K, n, 3) the basis, or a structured one with ``shape``, ``combine`` and ``normal_jacobian``
+        (:class:`DenseBasis`'s members)
     surface : :class:`.nricp.ScanSurface` in ``base``'s frame
     normals_of : callable ``X (n, 3) -> (n, 3)`` unit vertex normals of the model's topology
     h : length unit (the template's median edge length)
@@ -230,7 +316,8 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     -------
     ModelFit
     """
-    K, n = deltas.shape[0], base.shape[0]
+    basis = deltas if hasattr(deltas, "normal_jacobian") else DenseBasis(np.asarray(deltas))
+    K, n = basis.shape[0], base.shape[0]
     sigma = np.ones(K) if sigma is None else np.broadcast_to(np.asarray(sigma, float), (K,))
     lo, hi = (np.full(K, -np.inf), np.full(K, np.inf)) if bounds is None else (
         np.broadcast_to(np.asarray(bounds[0], float), (K,)), np.broadcast_to(np.asarray(bounds[1], float), (K,)))
@@ -240,10 +327,9 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         use = np.sort(use[np.random.default_rng(options.seed).choice(len(use), options.samples, replace=False)])
     npose = 7 if options.scale else 6
     pose = Similarity() if pose0 is None else pose0
-    Dflat = deltas.reshape(K, -1)
     cos_max = np.cos(np.radians(options.normal_angle))
     rms, kept, it = np.inf, 0, 0
-    X = pose.apply(base + (c @ Dflat).reshape(n, 3))
+    X = pose.apply(base + basis.combine(c))
     for it in range(1, options.iterations + 1):
         idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 0.5 * h)
         kept = len(idx)
@@ -257,7 +343,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         Jp = np.concatenate([np.cross(y, N), N, (y * N).sum(1, keepdims=True)], 1)[:, :npose]
         # d x_i / d c_k = s R D_k,i: the normal's component, (p, K)
         RN = pose.scale * (N @ pose.rotation)
-        Jc = np.einsum("kpj,pj->pk", deltas[:, idx, :], RN)
+        Jc = basis.normal_jacobian(idx, RN)
         w = 1.0 / np.sqrt(kept)
         mu = options.prior if options.prior_start is None else options.prior_start * (
             options.prior / options.prior_start) ** min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
@@ -266,12 +352,14 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         b = np.concatenate([-w * r0, -lam * c])
         lb = np.concatenate([np.full(npose, -np.inf), lo - c])
         ub = np.concatenate([np.full(npose, np.inf), hi - c])
-        dx = _solve(A, b, lb, ub)
+        # the bounds that held after the last step: the bounded step's first guess
+        start = (np.concatenate([np.zeros(npose, bool), c <= lo]), np.concatenate([np.zeros(npose, bool), c >= hi]))
+        dx = _solve(A, b, lb, ub, start if it > 1 else None)
         R = _rotation_from_vector(dx[:3])
         s = 1.0 + dx[6] if options.scale else 1.0
         pose = pose.then(Similarity(s, R, cen - s * R @ cen + dx[3:6]))
         c = np.clip(c + dx[npose:], lo, hi)
-        X_new = pose.apply(base + (c @ Dflat).reshape(n, 3))
+        X_new = pose.apply(base + basis.combine(c))
         step = float(np.abs(X_new - X).max())
         X = X_new
         if step < options.tolerance * h and (options.prior_start is None or mu == options.prior):

@@ -208,3 +208,30 @@ def test_cli_auto_detects_identity_meshes_beside_the_template(files, capsys):
     rc = main(["register", str(files / "person.obj"), "--template", str(ict / "neutral.obj"), "--out", str(files / "o2"),
                "--identity-basis", "none"])
     assert rc == 0 and "identity" not in json.loads((files / "o2" / "person.json").read_text())
+
+
+def test_bounded_step_is_the_bounded_least_squares_minimiser(monkeypatch):
+    """The model fit's bounded step (a box QP on the normal matrix: block principal pivoting, DAQP when it
+    does not settle) is BVLS's minimiser on A, with free (infinite-bound) unknowns beside bounded ones and
+    bounds active."""
+    from scipy.optimize import lsq_linear
+
+    from facebasis.geometry.shapemodel import _solve, box_qp
+
+    rng = np.random.default_rng(4)
+    A, b = rng.standard_normal((80, 30)), 3.0 * rng.standard_normal(80)
+    lb = np.concatenate([np.full(6, -np.inf), np.full(24, -0.2)])
+    ub = np.concatenate([np.full(6, np.inf), rng.uniform(0.0, 0.3, 24)])
+    ref = lsq_linear(A, b, bounds=(lb, ub), method="bvls", tol=1e-14).x
+    assert np.sum((ref <= lb + 1e-12) | (ref >= ub - 1e-12)) >= 3  # bounds matter
+    np.testing.assert_allclose(_solve(A, b, lb, ub), ref, rtol=0, atol=1e-9)
+    # block pivoting from a guess of the active bounds (right, or every bound wrong), and DAQP alone
+    H, g = A.T @ A, A.T @ b
+    right = (ref <= lb + 1e-12, ref >= ub - 1e-12)
+    wrong = (np.isfinite(lb) & ~right[0], np.zeros(30, bool))
+    daqp_only = box_qp(H, g, lb, ub, pivots=0)
+    import facebasis.geometry.shapemodel as sm
+
+    monkeypatch.setattr(sm, "_daqp", None)  # pivoting alone settles (no fallback)
+    for x in (box_qp(H, g, lb, ub), box_qp(H, g, lb, ub, right), box_qp(H, g, lb, ub, wrong), daqp_only):
+        np.testing.assert_allclose(x, ref, rtol=0, atol=1e-9)

@@ -259,7 +259,9 @@ class RigRetargeter:
         (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps the capture's commonest
         posture (the default before it)
     focal : the camera's focal length in pixels (None, the default: a weak-perspective camera);
-        ``centre`` its principal point (2,) px (None: the capture's median landmark position). Given,
+        ``centre`` its principal point (2,) px (None: the median of the visible landmarks, the
+        capture's in :meth:`run` / :meth:`estimate_noise`, the frame's in :meth:`solve_frame`:
+        :meth:`.framefit.FrameSolver.at_centre`; ``retarget`` gives the image centre). Given,
         every fit sees the landmarks with the perspective of the current estimate divided out
         (:meth:`.framefit.FrameSolver.flatten`): a face that comes closer is not read as an expression
     noise_model : "pixels" (the default): the landmark noise has a fixed size in pixels, so a frame
@@ -361,7 +363,7 @@ class RigRetargeter:
         noise, a face shape that differs from the rig's, landmark definitions that differ from the
         rig's landmark vertices. Noise-free captures of the rig give ~0.
         """
-        pilot = (self.model if model is None else model).pilot()
+        pilot = (self.model if model is None else model).at_centre(landmarks, visible).pilot()
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
         out = []
@@ -382,8 +384,7 @@ class RigRetargeter:
         evidence, which keeps a lost point's estimate but cannot use a made-up one); this retargeter
         is left as it is."""
         model, calibration, noise = self.model, None, float("nan")
-        if np.isfinite(model.focal) and model.centre is None:     # the principal point: where the face is
-            model = replace(model, centre=np.median(landmarks[np.asarray(visible, bool)], axis=0))
+        model = model.at_centre(landmarks, visible)     # the principal point (with a focal length)
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):

@@ -40,26 +40,6 @@ def check_camera(focal, centre) -> tuple[float, np.ndarray | None]:
     return float(f), c
 
 
-def reference_scale(solver, landmarks, visible, n: int = 40) -> float:
-    """The median scale s (px per rig unit) of up to ``n`` evenly spaced frames of a capture
-    (landmarks (T, L, 2), visible (T, L) bool), each posed on ``solver.v0`` alone (weights 0): the
-    s_ref of :attr:`FrameSolver.pixel_scale` (nan without a frame of 4 visible landmarks).
-
-    A detector's landmark error is a few pixels whatever the face's size in the image (cap12, dlib,
-    the last 20 s: the rms residual does not follow the scale, r = -0.04, while the scale goes from
-    8.2 to 5.2 px/unit), so in rig units it grows as the person moves away; the "auto" ridge is set
-    from the median noise, i.e. at this scale, and the frames of a smaller face weigh their landmarks
-    less (the MAP weights of a fixed pixel noise)."""
-    vis = np.asarray(visible, bool)
-    usable = np.flatnonzero(vis.sum(1) >= 4)
-    scales = []
-    for f in usable[np.unique(np.linspace(0, len(usable) - 1, min(len(usable), n)).round().astype(int))] if len(usable) else []:
-        v = vis[f]
-        s, R, t = fit_pose_affine(solver.v0[v], landmarks[f][v])
-        scales.append(fit_pose_gn(solver.v0[v], landmarks[f][v], s, R, t, iterations=4)[0])
-    return float(np.median(scales)) if scales else float("nan")
-
-
 @dataclass(frozen=True)
 class FrameFit:
     """One frame's fit (:meth:`FrameSolver.solve_frame`): weights x (k,), scale s (px per rig
@@ -102,7 +82,8 @@ class FrameSolver:
     ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
     pixel_scale : None: the data term in rig units (landmark noise of a fixed size on the face); a
         scale s_ref (px per rig unit): the data term in pixels over s_ref, i.e. each frame's term
-        times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels, :func:`reference_scale`)
+        times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels; s_ref: the median scale of the
+        pilot fits, :meth:`.rigdrive.RigRetargeter.pilot_stats`)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
         centre (2,) its principal point, px (see :meth:`flatten`)
     """
@@ -270,4 +251,4 @@ class FrameSolver:
         return FrameFit(x, float(s), R, t, float(rms), int(nodes), pf)
 
 
-__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera", "reference_scale"]
+__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera"]

@@ -78,7 +78,8 @@ class FrameSolver:
     pairs : (p, 2) int64 exclusive shape pairs
     smooth, ridge, sparsity : mu, rho and the sparse part of the weight prior
     contour : (c,) int64 landmark indices of a sliding contour; contour_slide its along-contour weight
-    alternations, tol : pose/weight rounds of a warm-started frame and the weight change that ends them
+    alternations, tol : pose/weight rounds of a warm-started frame; they end when the weights change by
+        at most tol and the scale by at most tol times itself
     ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
     pixel_scale : None: the data term in rig units (landmark noise of a fixed size on the face); a
         scale s_ref (px per rig unit): the data term in pixels over s_ref, i.e. each frame's term
@@ -228,8 +229,8 @@ class FrameSolver:
             if state is None:
                 raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
                                  f"found {int(vis.sum())}")
-            x, s, R, t = state
-            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
+            x, s, R, t = state                          # the previous frame's fit; flat at its pose
+            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0, self.flatten(p, self.landmarks3d(x), s, R))
         if state is None:
             x_prev = np.zeros(k)
             s, R, t = fit_pose_affine(self.v0[vis], p[vis])

@@ -1,7 +1,7 @@
 """Calm-frame weights on many cuts of the real clips: does the rest decision hold wherever a take starts?
 
     python -m problems.rest_cuts LABEL=CAPTURE_DIR [LABEL=PATTERN{start} ...] [--step 50] [--length 500]
-        [--variants before,default] [--out reports/retarget/rest_cuts.csv] [--md reports/retarget/rest_cuts.md]
+        [--variants rig_noise,default] [--first 0] [--out reports/retarget/rest_cuts.csv] [--md reports/retarget/rest_cuts.md]
     python -m problems.rest_cuts --make-track-cuts CLIP.mp4 OUT_ROOT [--step 50] [--length 500]
 
 Each source is ``clip:mode=PATH``. A capture folder (``facebasis capture CLIP --detector dlib|mediapipe``)
@@ -10,21 +10,25 @@ corrects every frame, so a capture of the cut itself differs only in its first f
 ``{start}`` names one capture per cut, made from the cut itself (tracking-only captures drift from
 their first frame, so slicing would not be the take the owner captures): ``--make-track-cuts`` writes
 them, ``facebasis landmarks --detector dlib`` on the cut's first frame, then ``facebasis capture
---landmarks`` on the cut's frames. Cuts start every ``step`` frames (2 s at 25 fps) and are kept
-when at least 150 frames long.
+--landmarks`` on the cut's frames. Cuts start every ``step`` frames from frame ``first`` and are kept
+when at least 150 frames long. The recipe (``python -m problems.reproduce rest-cuts``) cuts the detector
+captures (dlib and MediaPipe) every 8 s from 4 s (``--step 200 --first 100`` at 25 fps) plus the takes'
+starts (``--step 100000``), and the tracking-only captures every 8 s from 0, with the variants
+*rig_noise* and *default* (the ``--variants`` default), merged into one table.
 
 Every cut's frame 0 is labelled at rest or not by landmarks alone (:func:`facebasis.retarget.reststart.rest_start`:
 the first 0.5 s held within the owner's 1.5% calm tolerance, lips closed against the capture's own
 closed-lip gap), independently of any weights, then retargeted onto ICT-FaceKit's 53 expressions
-(``../shared/data/ict``) with ``facebasis retarget``'s defaults (*default*) and with the rest rule
-before the landmark evidence (*before*: the first frame's posture when it recurs and demands <= 1.25
-times the commonest posture's negative weight), and measured by the owner's metric (calm frames:
+(``../shared/data/ict``) with ``facebasis retarget``'s defaults (*default*), with the landmark noise of
+a fixed size in rig units (*rig_noise*: ``noise_model="rig"``, the default before the pixel noise
+model) and, on request, with the former model altogether (*before*: the rest rule before the landmark
+evidence, the first frame's posture when it recurs and demands <= 1.25 times the commonest posture's
+negative weight, and ``noise_model="rig"``), and measured by the owner's metric (calm frames:
 landmarks within 1.5% of the face width of the cut's frame 0 after a similarity alignment; the
 median over them of the largest weight, target <= 0.15; over all frames the median of the largest
 left/right difference, target <= 0.2), with jawOpen on the calm frames and its correlation with the
 inner-lip opening (a cut that starts with the mouth open carries jawOpen on its calm frames: those
-cuts are reported apart, not counted against the target). Variant *rig_noise*: the landmark noise of
-a fixed size in rig units (``noise_model="rig"``, the default before the pixel noise model).
+cuts are reported apart, not counted against the target).
 """
 
 from __future__ import annotations
@@ -46,7 +50,8 @@ MIN_FRAMES = 150
 LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
-VARIANTS = {"before": ({}, False), "default": ({}, True), "no_anchor": ({"rest_anchor": False}, True),
+VARIANTS = {"before": ({"noise_model": "rig"}, False), "default": ({}, True),
+            "no_anchor": ({"rest_anchor": False}, True),
             "rig_noise": ({"noise_model": "rig"}, True)}
 
 
@@ -228,7 +233,7 @@ def read_rows(path) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sources", nargs="*", help="clip:mode=CAPTURE_DIR or clip:mode=PATTERN with {start}")
-    ap.add_argument("--variants", default="before,default")
+    ap.add_argument("--variants", default="rig_noise,default")
     ap.add_argument("--step", type=int, default=50, help="frames between cut starts")
     ap.add_argument("--length", type=int, default=500, help="most frames of a cut")
     ap.add_argument("--first", type=int, default=0, help="frame of the first cut's start")

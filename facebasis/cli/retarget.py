@@ -53,7 +53,7 @@ def cmd_retarget(args) -> int:
                      ridge=args.ridge, neutral=args.neutral,
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
                      preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
-                     rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model or "pixels")
+                     rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0

@@ -51,7 +51,7 @@ import numpy as np
 
 from .framefit import FrameSolver
 from .onesided import demand_ratio
-from .pose import PI, fit_pose_affine, fit_pose_gn
+from .pose import PI, fit_pose_affine
 
 #: pilot frames (evenly spaced) of the calibration
 CALIBRATION_FRAMES = 40
@@ -91,6 +91,8 @@ class IdentityCalibration:
         first round (the rig's own neutral) and after the last update
     noise : median over the pilot frames of rms residual / scale after the last update (rig units;
         the landmark noise of the "auto" ridge, :meth:`.rigdrive.RigRetargeter.estimate_noise`)
+    scale : median scale s (px per rig unit) of the same pilot fits as ``noise`` (the s_ref of the
+        pixel noise model, :attr:`.framefit.FrameSolver.pixel_scale`; nan with ``noise``)
     applied : False when the offset lowered the pilot residual by less than :data:`MIN_GAIN` (then
         nothing is applied: offset and baseline are 0 and rms_after, noise those of the rig's neutral)
     rest_applied, quantile_applied : ``identity="auto"``: the rest face (:func:`calibrate_rest`) /
@@ -118,6 +120,7 @@ class IdentityCalibration:
     rest_anchored: bool = False
     rest_start: bool | None = None
     demand_ratio: float = float("nan")
+    scale: float = float("nan")
 
 
 def pilot_frames(visible, n: int = CALIBRATION_FRAMES) -> np.ndarray:
@@ -173,7 +176,7 @@ def calibrate_identity(solver: FrameSolver, landmarks, visible, n_frames: int = 
     # explain every landmark coordinate, the jaw line's along-contour position included
     pilot = solver.pilot()
     states = [None] * F
-    rms_first = rms = noise = noise_first = float("nan")
+    rms_first = rms = noise = noise_first = scale = scale_first = float("nan")
     for rnd in range(rounds + 1):
         out = [pilot.solve_frame(P[f], vis[f], states[j]) for j, f in enumerate(frames)]
         states = [o.state for o in out]
@@ -183,9 +186,9 @@ def calibrate_identity(solver: FrameSolver, landmarks, visible, n_frames: int = 
         Ts = np.array([o.t for o in out])
         res = np.array([o.rms for o in out])
         rms = float(np.nanmedian(res))
-        noise = float(np.nanmedian(res / S))
+        noise, scale = float(np.nanmedian(res / S)), float(np.nanmedian(S))
         if rnd == 0:
-            rms_first, noise_first = rms, noise
+            rms_first, noise_first, scale_first = rms, noise, scale
         if rnd == rounds or (rnd == 1 and not rms <= (1.0 - MIN_GAIN) * rms_first):
             break                           # measured the calibrated fit, or the first update gained nothing
         good = res <= OUTLIER * np.nanmedian(res)        # frames the tracker lost take no part
@@ -206,8 +209,9 @@ def calibrate_identity(solver: FrameSolver, landmarks, visible, n_frames: int = 
         states = [(np.clip(x - c, 0.0, 1.0), s, R, t) for (x, s, R, t) in states]   # warm start
     if not rms <= (1.0 - MIN_GAIN) * rms_first:     # nothing static to explain (e.g. the rig's own face)
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, rms_first, rms_first, noise_first, False,
-                                   neutral=v_start)
-    return IdentityCalibration(pilot.v0 - v_start, baseline, frames, rms_first, rms, noise, True, neutral=pilot.v0)
+                                   neutral=v_start, scale=scale_first)
+    return IdentityCalibration(pilot.v0 - v_start, baseline, frames, rms_first, rms, noise, True, neutral=pilot.v0,
+                               scale=scale)
 
 
 def first_frame_offset(solver: FrameSolver, p, visible) -> np.ndarray:
@@ -226,10 +230,7 @@ def first_frame_offset(solver: FrameSolver, p, visible) -> np.ndarray:
         raise InputError("first-frame neutral: expected at least 4 visible landmarks on frame 0")
     v0 = solver.v0
     s, R, t = fit_pose_affine(v0[vis], p[vis])
-    pf = p
-    for _ in range(1 if np.isinf(solver.focal) else 3):            # the landmarks as the model sees them
-        s, R, t, _ = fit_pose_gn(v0[vis], pf[vis], s, R, t, iterations=10)
-        pf = solver.flatten(p, v0, s, R)
+    s, R, t, _, pf = solver.fit_pose(v0, p, vis, s, R, t, rounds=3, iterations=10)   # pf: as the model sees them
     r = np.where(vis[:, None], pf - (s * (v0 @ R.T @ PI.T) + t), 0.0)
     return (r @ PI @ R) / s
 
@@ -273,10 +274,7 @@ def rest_offsets(solver, landmarks, visible, frames, poses=None):
         W = contour_weights(P[f], solver.contour, solver.contour_slide)
         W = None if W is None else W[v]
         s, R, t = fit_pose_affine(solver.v0[v], P[f][v]) if poses is None else poses[j]
-        pf = P[f]
-        for _ in range(1 if np.isinf(solver.focal) else 2):          # the landmarks as the model sees them
-            s, R, t, rms[j] = fit_pose_gn(solver.v0[v], pf[v], s, R, t, iterations=4, sqrtw=W)
-            pf = solver.flatten(P[f], solver.v0, s, R)
+        s, R, t, rms[j], pf = solver.fit_pose(solver.v0, P[f], v, s, R, t, rounds=2, iterations=4, sqrtw=W)
         new_poses.append((s, R, t))
         o = ((pf - (s * (solver.v0 @ R.T @ PI.T) + t)) @ PI @ R) / s
         out[j, v] = o[v]
@@ -428,7 +426,8 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True,
         both = calibrate_identity(solver.with_neutral(rest.neutral), landmarks, visible)   # the baseline on the rest face
         if both.rms_after < quant.rms_after:
             common = IdentityCalibration(both.neutral - v_start, both.baseline, both.frames, quant.rms_before,
-                                         both.rms_after, both.noise, True, True, both.applied, neutral=both.neutral)
+                                         both.rms_after, both.noise, True, True, both.applied, neutral=both.neutral,
+                                         scale=both.scale)
     verdict = None if start is None else start.at_rest
     common = replace(common, rest_start=verdict)
     if not anchor or verdict is False:

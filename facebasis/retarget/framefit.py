@@ -40,26 +40,6 @@ def check_camera(focal, centre) -> tuple[float, np.ndarray | None]:
     return float(f), c
 
 
-def reference_scale(solver, landmarks, visible, n: int = 40) -> float:
-    """The median scale s (px per rig unit) of up to ``n`` evenly spaced frames of a capture
-    (landmarks (T, L, 2), visible (T, L) bool), each posed on ``solver.v0`` alone (weights 0): the
-    s_ref of :attr:`FrameSolver.pixel_scale` (nan without a frame of 4 visible landmarks).
-
-    A detector's landmark error is a few pixels whatever the face's size in the image (cap12, dlib,
-    the last 20 s: the rms residual does not follow the scale, r = -0.04, while the scale goes from
-    8.2 to 5.2 px/unit), so in rig units it grows as the person moves away; the "auto" ridge is set
-    from the median noise, i.e. at this scale, and the frames of a smaller face weigh their landmarks
-    less (the MAP weights of a fixed pixel noise)."""
-    vis = np.asarray(visible, bool)
-    usable = np.flatnonzero(vis.sum(1) >= 4)
-    scales = []
-    for f in usable[np.unique(np.linspace(0, len(usable) - 1, min(len(usable), n)).round().astype(int))] if len(usable) else []:
-        v = vis[f]
-        s, R, t = fit_pose_affine(solver.v0[v], landmarks[f][v])
-        scales.append(fit_pose_gn(solver.v0[v], landmarks[f][v], s, R, t, iterations=4)[0])
-    return float(np.median(scales)) if scales else float("nan")
-
-
 @dataclass(frozen=True)
 class FrameFit:
     """One frame's fit (:meth:`FrameSolver.solve_frame`): weights x (k,), scale s (px per rig
@@ -98,11 +78,13 @@ class FrameSolver:
     pairs : (p, 2) int64 exclusive shape pairs
     smooth, ridge, sparsity : mu, rho and the sparse part of the weight prior
     contour : (c,) int64 landmark indices of a sliding contour; contour_slide its along-contour weight
-    alternations, tol : pose/weight rounds of a warm-started frame and the weight change that ends them
+    alternations, tol : pose/weight rounds of a warm-started frame; they end when the weights change by
+        at most tol and the scale by at most tol times itself
     ipopt : a :class:`facebasis.rigging.weights.WeightSolver` (``solver="ipopt"``) or None (certified)
     pixel_scale : None: the data term in rig units (landmark noise of a fixed size on the face); a
         scale s_ref (px per rig unit): the data term in pixels over s_ref, i.e. each frame's term
-        times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels, :func:`reference_scale`)
+        times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels; s_ref: the median scale of the
+        pilot fits, :meth:`.rigdrive.RigRetargeter.pilot_stats`)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
         centre (2,) its principal point, px (see :meth:`flatten`)
     """
@@ -142,6 +124,16 @@ class FrameSolver:
         return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0,
                        contour_slide=1.0 if plain else self.contour_slide)
 
+    def at_centre(self, landmarks, visible) -> "FrameSolver":
+        """The solver with its principal point resolved: ``centre`` as given (the ``retarget`` command
+        gives the image centre), else, with a focal length, the median of the visible landmarks
+        (``landmarks`` (T, L, 2) or (L, 2), ``visible`` (T, L) or (L,) bool: :meth:`.rigdrive.RigRetargeter.run`
+        passes the capture's, :meth:`solve_frame` the frame's). Without a focal length: itself."""
+        if not np.isfinite(self.focal) or self.centre is not None:
+            return self
+        P, vis = np.asarray(landmarks, np.float64), np.asarray(visible, bool)
+        return replace(self, centre=np.median(P[vis], axis=0) if vis.any() else np.median(P.reshape(-1, 2), axis=0))
+
     def flatten(self, p, q, s, R) -> np.ndarray:
         """Landmarks p (L, 2) as a weak-perspective camera would see the rig points q (L, 3) at the
         pose (s, R): ``c + (p - c) (1 - s z_l / f)``, z_l = (R q_l)_z the depth of a point towards the
@@ -154,12 +146,42 @@ class FrameSolver:
         the weak-perspective fit see a face that comes closer as a larger face, not as a face whose
         nose and brows grow against its jaw line (measured on cap12: the jaw width over the eye
         distance follows the scale at r = -0.89, read as browDown/jawLeft). ``focal`` inf: p itself.
+        A focal length at which a landmark is at or behind the camera (s z_l >= f) is an
+        :class:`InputError` naming ``focal``.
         """
         if not np.isfinite(self.focal):
             return p
-        z = np.asarray(q, np.float64) @ np.asarray(R)[2]                     # (L,) towards the camera
-        g = np.maximum(1.0 - s * z / self.focal, 0.1)                        # a point never behind the camera
+        g = self._magnification(q, s, R)
         return self.centre + (np.asarray(p, np.float64) - self.centre) * g[:, None]
+
+    def _magnification(self, q, s, R) -> np.ndarray:
+        """(L,) ``1 - s z_l / f`` of the rig points q (L, 3) at the pose (s, R); > 0 or an InputError."""
+        z = np.asarray(q, np.float64) @ np.asarray(R)[2]                     # (L,) towards the camera
+        g = 1.0 - s * z / self.focal
+        if g.min() <= 0.0:
+            raise parameter_error("focal", f"a focal length in pixels above {s * z.max():.4g} (the face's scale "
+                                  f"{s:.4g} px per rig unit times its nearest landmark's depth {z.max():.4g}: "
+                                  "a smaller one puts it at or behind the camera)", f"{self.focal:g}")
+        return g
+
+    def fit_pose(self, q, p, vis, s, R, t, rounds: int = 1, iterations: int = 3, sqrtw=None):
+        """The pose of the rig points q (L, 3) on the landmarks p (L, 2) (visible (L,) bool) from
+        (s, R, t): ``rounds`` times (once without a focal length) the landmarks flattened at the
+        current pose (:meth:`flatten`) and the pose fitted to them (:func:`.pose.fit_pose_gn`,
+        ``iterations``, ``sqrtw`` (Lv, 2, 2) of the visible landmarks) -- POSIT's loop.
+
+        Returns (s, R, t, rms, flat): rms the residual of the visible landmarks in image pixels (the
+        pinhole image of the fitted model against p), flat (L, 2) the landmarks flattened at the
+        fitted pose."""
+        pf = self.flatten(p, q, s, R)
+        for _ in range(1 if not np.isfinite(self.focal) else rounds):
+            s, R, t, rms = fit_pose_gn(q[vis], pf[vis], s, R, t, iterations=iterations, sqrtw=sqrtw)
+            pf = self.flatten(p, q, s, R)
+        if np.isfinite(self.focal):                      # the residual in the image, not the flattened one
+            g = self._magnification(q, s, R)
+            image = self.centre + (s * (q @ R.T @ PI.T) + t - self.centre) / g[:, None]
+            rms = float(np.sqrt(np.mean(np.sum((image - p)[vis] ** 2, axis=1))))
+        return s, R, t, rms, pf
 
     def landmarks3d(self, x) -> np.ndarray:
         """Rig landmark positions (L, 3) at weights x (k,)."""
@@ -200,35 +222,34 @@ class FrameSolver:
         """
         p = np.asarray(p, np.float64)
         vis = np.ones(len(p), bool) if visible is None else np.asarray(visible, bool)
+        if np.isfinite(self.focal) and self.centre is None:      # the principal point of this frame alone
+            return self.at_centre(p, vis).solve_frame(p, vis, state)
         k = self.n_shapes
         if vis.sum() < 4:
             if state is None:
                 raise InputError(f"frame landmarks: expected at least 4 visible landmarks on the first frame, "
                                  f"found {int(vis.sum())}")
-            x, s, R, t = state
-            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0)
+            x, s, R, t = state                          # the previous frame's fit; flat at its pose
+            return FrameFit(x.copy(), s, R.copy(), t.copy(), float("nan"), 0, self.flatten(p, self.landmarks3d(x), s, R))
         if state is None:
             x_prev = np.zeros(k)
             s, R, t = fit_pose_affine(self.v0[vis], p[vis])
-            n_alt = max(6, 2 * self.alternations)
+            n_alt, rounds = max(6, 2 * self.alternations), 3    # no pose yet: POSIT's loop runs longer
         else:
             x_prev, s, R, t = state
-            n_alt = self.alternations
+            n_alt, rounds = self.alternations, 1
         W = contour_weights(p, self.contour, self.contour_slide)
         W = None if W is None else W[vis]
-        x, nodes, pf = x_prev.copy(), 0, p
+        x, nodes = x_prev.copy(), 0
         for _ in range(n_alt):
-            q = self.landmarks3d(x)
-            pf = self.flatten(p, q, s, R)
-            s, R, t, _ = fit_pose_gn(q[vis], pf[vis], s, R, t, iterations=3, sqrtw=W)
+            s_old = s
+            s, R, t, _, pf = self.fit_pose(self.landmarks3d(x), p, vis, s, R, t, rounds=rounds, sqrtw=W)
             x_old = x
             x, nodes = self._weights(pf, vis, s, R, t, x_prev, x, W)
-            if np.abs(x - x_old).max() <= self.tol:
+            if np.abs(x - x_old).max() <= self.tol and abs(s - s_old) <= self.tol * s:   # weights and pose settled
                 break
-        q = self.landmarks3d(x)
-        pf = self.flatten(p, q, s, R)
-        s, R, t, rms = fit_pose_gn(q[vis], pf[vis], s, R, t, iterations=3, sqrtw=W)
+        s, R, t, rms, pf = self.fit_pose(self.landmarks3d(x), p, vis, s, R, t, sqrtw=W)
         return FrameFit(x, float(s), R, t, float(rms), int(nodes), pf)
 
 
-__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera", "reference_scale"]
+__all__ = ["FrameFit", "FrameSolver", "RIDGE_FLOOR", "check_camera"]

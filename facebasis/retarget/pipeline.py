@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_directory, atomic_write_bytes, atomic_write_json
-from ..errors import InputError, NamedText, parameter_error
+from ..errors import InputError, NamedText, parameter_error, parse_mode
 from ..capture.trackfile import OVERLAY_FILE, read_capture
 
 
@@ -342,7 +342,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
                  identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
                  unit: str = "cm", rest_anchor: bool = True, focal: float | None = None,
-                 noise_model: str = "pixels") -> dict:
+                 noise_model: str | None = None) -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
@@ -353,7 +353,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     or "rig" (:func:`.rigdrive.resolve_identity`; ``first_frame_neutral=True`` is "first-frame").
     ``rest_anchor``: with ``identity`` "auto", the first frame's posture may be the rest face
     (:class:`.rigdrive.RigRetargeter`). ``focal`` (px, None: weak perspective; principal point the image
-    centre) and ``noise_model`` ("pixels" or "rig"): :class:`.rigdrive.RigRetargeter`. ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    centre, recorded as ``principal_point_px``) and ``noise_model`` ("pixels", the default, or "rig"): :class:`.rigdrive.RigRetargeter`. ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
     (the source video beside the rig rendered with the solved weights and head rotation) and
     ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
@@ -361,10 +361,11 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     from ..geometry.gltf import unit_scale
     from .framefit import check_camera
     from .preview import rig_frames
-    from .rigdrive import DEFAULT_SMOOTH, RigRetargeter, resolve_identity, resolve_pairs
+    from .rigdrive import DEFAULT_SMOOTH, NOISE_MODELS, RigRetargeter, resolve_identity, resolve_pairs
 
     unit_scale(unit)                                  # a bad --unit: said before any work
-    check_camera(focal, None)                         # and a bad focal length
+    check_camera(focal, None)                         # a bad focal length, and a bad noise model
+    noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
     ridge = _parse_ridge(ridge)
     from .rigdrive import IDENTITY_MODES
 
@@ -390,7 +391,8 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
     extra = {"smooth": smooth, "ridge": result.ridge, "ridge_rule": "auto" if ridge == "auto" else "given",
              "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame",
-             "focal_px": focal, "noise_model": solver_obj.noise_model, "noise_pixel_scale": result.pixel_scale}
+             "focal_px": focal, "principal_point_px": None if centre is None else [float(c) for c in centre],
+             "noise_model": solver_obj.noise_model, "noise_pixel_scale": result.pixel_scale}
     cal = result.calibration
     if cal is not None:
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))

@@ -48,8 +48,8 @@ noise-free synthetic captures keep rho = 1e-3 and their exact answers, 0.5 / 1 p
 (6.7 px/cm) gives rho 0.49 with ICT's own neutral and 0.20 with ``first_frame_neutral``, and no
 weight saturated (11% above 0.95 with rho = 1e-3). A number given as ``ridge`` is used as is.
 Landmark noise model (``noise_model="pixels"``, the default): a detector's error has a fixed size in
-pixels, so each frame's data term is weighted ``(s / s_ref)^2`` (s_ref the capture's median scale,
-where the ridge is set): a person who leans away from the camera is not read as an expression
+pixels, so each frame's data term is weighted ``(s / s_ref)^2`` (s_ref the median scale of the
+pilot fits that set the ridge): a person who leans away from the camera is not read as an expression
 (cap12's last 20 s: browDown_R 0.45 on calm frames, following the scale at r = -0.81 -> 0.11).
 
 Identity (``identity``): the rig's neutral landmarks are not the filmed person's. ``"auto"`` (the
@@ -71,7 +71,7 @@ import numpy as np
 from ..errors import InputError, named_params, parameter_error, parse_mode
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
-from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera, reference_scale
+from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
 from .observe import Identifiability, identifiability, landmark_jacobian
 from .reststart import rest_start
 from .pose import (
@@ -259,12 +259,14 @@ class RigRetargeter:
         (:func:`.calibrate.calibrate_auto`, step 2; default True); False keeps the capture's commonest
         posture (the default before it)
     focal : the camera's focal length in pixels (None, the default: a weak-perspective camera);
-        ``centre`` its principal point (2,) px (None: the capture's median landmark position). Given,
+        ``centre`` its principal point (2,) px (None: the median of the visible landmarks, the
+        capture's in :meth:`run` / :meth:`estimate_noise`, the frame's in :meth:`solve_frame`:
+        :meth:`.framefit.FrameSolver.at_centre`; ``retarget`` gives the image centre). Given,
         every fit sees the landmarks with the perspective of the current estimate divided out
         (:meth:`.framefit.FrameSolver.flatten`): a face that comes closer is not read as an expression
     noise_model : "pixels" (the default): the landmark noise has a fixed size in pixels, so a frame
         whose face is smaller in the image weighs its landmarks less (the data term times
-        ``(s / s_ref)^2``, s_ref the capture's median scale: :func:`.framefit.reference_scale`);
+        ``(s / s_ref)^2``, s_ref the median scale of the pilot fits that set the noise: :meth:`pilot_stats`);
         "rig": a fixed size on the face (the former model; the same while the face keeps its size)
     """
 
@@ -352,38 +354,38 @@ class RigRetargeter:
         return self.model.solve_frame(p, visible, state)
 
     def estimate_noise(self, landmarks, visible, model: FrameSolver | None = None) -> float:
-        """Landmark noise of a capture in rig units, for the "auto" ridge.
+        """Landmark noise of a capture in rig units, for the "auto" ridge (:meth:`pilot_stats`)."""
+        return self.pilot_stats(landmarks, visible, model)[0]
+
+    def pilot_stats(self, landmarks, visible, model: FrameSolver | None = None) -> tuple[float, float]:
+        """(noise, s_ref): landmark noise in rig units (the "auto" ridge) and the pilot scale.
 
         Up to :data:`PILOT_FRAMES` frames, evenly spaced, are each fitted on their own (pose and
         weights, no temporal term, ridge :data:`RIDGE_FLOOR`: :meth:`.framefit.FrameSolver.pilot` of
-        ``model``, by default :attr:`model`); the estimate is the median over them of the rms landmark
-        residual divided by the frame's scale s. It holds whatever the rig cannot reproduce: tracker
-        noise, a face shape that differs from the rig's, landmark definitions that differ from the
-        rig's landmark vertices. Noise-free captures of the rig give ~0.
+        ``model``, by default :attr:`model`); noise is the median over them of the rms landmark
+        residual divided by the frame's scale s, s_ref their median s (px per rig unit: the pixel
+        noise model's, :attr:`.framefit.FrameSolver.pixel_scale`); nan without a frame of 4 visible
+        landmarks. The noise holds whatever the rig cannot reproduce: tracker noise, a face shape
+        that differs from the rig's, landmark definitions that differ from the rig's landmark
+        vertices. Noise-free captures of the rig give ~0.
         """
-        pilot = (self.model if model is None else model).pilot()
+        pilot = (self.model if model is None else model).at_centre(landmarks, visible).pilot()
         T = len(landmarks)
         frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
-        out = []
-        for f in frames:
-            if visible[f].sum() < 4:
-                continue
-            fit = pilot.solve_frame(landmarks[f], visible[f], None)
-            if np.isfinite(fit.rms) and fit.s > 0:
-                out.append(fit.rms / fit.s)
-        return float(np.median(out)) if out else float("nan")
+        fits = [pilot.solve_frame(landmarks[f], visible[f], None) for f in frames if visible[f].sum() >= 4]
+        fits = [fit for fit in fits if np.isfinite(fit.rms) and fit.s > 0]
+        if not fits:
+            return float("nan"), float("nan")
+        return float(np.median([fit.rms / fit.s for fit in fits])), float(np.median([fit.s for fit in fits]))
 
     def settle(self, landmarks, visible, fps: float = 30.0, finite=None) -> tuple[FrameSolver, IdentityCalibration | None, float]:
-        """What a capture's frames are solved with: (the frame solver on the person's neutral and
-        with the ridge of the "auto" rule, the identity calibration or None, the noise estimate (nan
-        when the ridge was given)). ``landmarks`` (T, L, 2) without NaN, ``visible`` (T, L) bool,
-        ``fps`` (the start window of :func:`.reststart.rest_start`), ``finite`` (T, L) bool: the points
-        that had coordinates before NaN was replaced (default all; the others are left out of the start
-        evidence, which keeps a lost point's estimate but cannot use a made-up one); this retargeter
-        is left as it is."""
-        model, calibration, noise = self.model, None, float("nan")
-        if np.isfinite(model.focal) and model.centre is None:     # the principal point: where the face is
-            model = replace(model, centre=np.median(landmarks[np.asarray(visible, bool)], axis=0))
+        """What a capture's frames are solved with: (the frame solver on the person's neutral, with the
+        ridge of the "auto" rule, the pixel noise's s_ref and the principal point, the identity calibration
+        or None, the noise estimate (nan when the ridge was given)). ``landmarks`` (T, L, 2) without NaN,
+        ``visible`` (T, L) bool, ``fps`` (the start window of :func:`.reststart.rest_start`), ``finite``
+        (T, L) bool: the points that had coordinates before NaN was replaced (default all; the others are
+        left out of the start evidence: it keeps a lost point's estimate but cannot use a made-up one)."""
+        model, calibration, noise = self.model.at_centre(landmarks, visible), None, float("nan")   # principal point
         if self.identity == "first-frame":
             model = model.shifted(first_frame_offset(model, landmarks[0], visible[0]))
         elif self.identity in ("auto", "quantile"):
@@ -394,15 +396,14 @@ class RigRetargeter:
             else:
                 calibration = calibrate_identity(model, landmarks, visible)
             model = model.with_neutral(calibration.neutral)
-        if self.auto:
-            if calibration is not None and np.isfinite(calibration.noise):
-                noise = calibration.noise                  # its last pass is the same pilot fit
-            else:
-                noise = self.estimate_noise(landmarks, visible, model)
-            model = replace(model, ridge=auto_ridge(noise))
-        if self.noise_model == "pixels":
-            s_ref = reference_scale(model, landmarks, visible)
-            model = replace(model, pixel_scale=s_ref if np.isfinite(s_ref) and s_ref > 0 else None)
+        if self.auto or self.noise_model == "pixels":     # the pilot fits (the calibration's last pass is one)
+            known = calibration is not None and np.isfinite(calibration.noise)
+            pilot_noise, s_ref = (calibration.noise, calibration.scale) if known else self.pilot_stats(landmarks, visible, model)
+            if self.auto:
+                noise = pilot_noise
+                model = replace(model, ridge=auto_ridge(noise))
+            if self.noise_model == "pixels":
+                model = replace(model, pixel_scale=s_ref if np.isfinite(s_ref) and s_ref > 0 else None)
         return model, calibration, noise
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -443,7 +444,7 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
     return RigRetargeter(rig, idx, pairs, smooth, ridge, **kw).run(landmarks, lost, fps)
 
 
-__all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine",
-           "fit_pose_gn", "rotation_from_vector", "rotation_to_vector", "check_landmark_indices",
-           "resolve_pairs", "Identifiability", "identifiability", "landmark_jacobian",
-           "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES", "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI"]
+__all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine", "fit_pose_gn",
+           "rotation_from_vector", "rotation_to_vector", "check_landmark_indices", "resolve_pairs", "Identifiability",
+           "identifiability", "landmark_jacobian", "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES",
+           "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI", "NOISE_MODELS"]

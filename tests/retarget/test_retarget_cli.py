@@ -10,6 +10,7 @@ from conftest import parser_refuses
 from facebasis.defaults.cartoon import default_cartoon
 from facebasis.defaults.face import default_template
 from facebasis.defaults.face_landmarks import face_landmarks
+from facebasis.errors import InputError
 from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.rig import write_rig_folder
 from facebasis.capture.trackfile import write_capture
@@ -343,6 +344,7 @@ def test_focal_and_noise_model_options(capture, tmp_path, capsys, monkeypatch):
         summary = json.loads((out / "summary.json").read_text())
         assert summary["focal_px"] == want[0] and summary["noise_model"] == want[2]
         assert (summary["noise_pixel_scale"] is None) == (want[2] == "rig")
+        assert summary["principal_point_px"] == (None if want[1] is None else list(want[1]))
     assert inspect.signature(original).parameters["noise_model"].default == "pixels"
     assert inspect.signature(original).parameters["focal"].default is None
     for argv, msg in ((["--focal", "0"], "--focal: expected a focal length in pixels > 0, found 0"),
@@ -356,3 +358,21 @@ def test_focal_and_noise_model_options(capture, tmp_path, capsys, monkeypatch):
                       (["--noise-model", "rig", "--noise-model", "pixels"], "--noise-model")):
         parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
         assert not (tmp_path / "bad").exists()
+
+
+def test_a_bad_noise_model_is_said_before_the_capture_is_read(tmp_path):
+    """run_retarget checks noise_model before any work: a capture folder that does not exist is not
+    what the error names; the CLI passes None (the library's default) when --noise-model is not given."""
+    from facebasis.retarget.pipeline import run_retarget
+
+    with pytest.raises(InputError, match=r"^noise_model: expected one of pixels, rig, found 'metres'$"):
+        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", noise_model="metres")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_principal_point_is_not_named_as_focal():
+    """The CLI never takes a principal point (it is the image centre): a bad one comes from the capture
+    folder's size, which its own error names, so ``centre`` maps to no flag (it was ``--focal``)."""
+    from facebasis.cli.common import FLAGS
+
+    assert "centre" not in FLAGS and FLAGS["focal"] == "--focal" and FLAGS["noise_model"] == "--noise-model"

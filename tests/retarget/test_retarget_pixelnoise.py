@@ -1,7 +1,7 @@
 """Landmark noise of a fixed size in pixels (issue 23, target 3: calm frames of a person who leans
 away from the camera carried browDown_R 0.45-0.85 on cap12's last 20 s, following the solved scale at
 r = -0.81 while the residual in pixels did not follow it, r = -0.04): ``RigRetargeter(noise_model=...)``,
-:func:`facebasis.retarget.framefit.reference_scale`."""
+:meth:`facebasis.retarget.rigdrive.RigRetargeter.pilot_stats`."""
 
 import numpy as np
 import pytest
@@ -10,7 +10,6 @@ from test_retarget_restface import own_face
 from facebasis.defaults.face import default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.errors import InputError
-from facebasis.retarget.framefit import reference_scale
 from facebasis.retarget.pose import project_landmarks, rotation_from_vector
 from facebasis.retarget.rigdrive import RigRetargeter
 from facebasis.retarget.synthetic import smooth_weight_curves
@@ -53,12 +52,14 @@ def test_a_face_at_rest_far_from_the_camera_keeps_weights_near_zero(seed):
 
 
 def test_reference_scale_is_the_median_scale_of_the_capture():
+    """s_ref: the median scale of the pilot fits that set the noise (RigRetargeter.pilot_stats)."""
     rig, idx = default_template(), face_landmarks()
     X, s, P = take(rig, idx, 0)
-    model = RigRetargeter(rig, idx).model
+    r = RigRetargeter(rig, idx)
     vis = np.ones(P.shape[:2], bool)
-    assert abs(reference_scale(model, P, vis) - np.median(s)) < 0.05 * np.median(s)
-    assert np.isnan(reference_scale(model, P, np.zeros_like(vis)))
+    noise, s_ref = r.pilot_stats(P, vis)
+    assert abs(s_ref - np.median(s)) < 0.05 * np.median(s) and noise == r.estimate_noise(P, vis)
+    assert np.isnan(r.pilot_stats(P, np.zeros_like(vis))[1])
 
 
 @pytest.mark.parametrize("bad", ["metres", "", 3, None])

@@ -1,0 +1,15 @@
+"""The benchmarks' baselines run the former model: ``before`` is the defaults before issue 23, the
+landmark noise in rig units included (``noise_model="rig"``; the default is now "pixels")."""
+
+import inspect
+
+from problems import rest_cuts, rig_plausibility
+
+from facebasis.retarget.rigdrive import RigRetargeter
+
+
+def test_before_variants_run_the_former_noise_model():
+    assert rig_plausibility.VARIANTS["before"]["noise_model"] == "rig"
+    assert rest_cuts.VARIANTS["before"][0]["noise_model"] == "rig"
+    assert rest_cuts.VARIANTS["rig_noise"][0] == {"noise_model": "rig"}
+    assert inspect.signature(RigRetargeter).parameters["noise_model"].default == "pixels"   # what "default" runs

@@ -15,6 +15,7 @@ objlayout   an OBJ's own layout (vt/vn, materials, groups, polygons) kept in the
 objscan     byte-level scanning of OBJ lines (keywords, numbers, face references) for objlayout
 numtext     decimal text to and from arrays, exact and loop-free (the OBJ reader's and writer's kernels)
 poisson     factor-once reconstruction of vertices from triangle edges (Cholesky, cholespy)
+boxqp       exact convex box-constrained QPs (DAQP + active-set refinement): certification's nodes, model fits
 cholesky    the one sparse Cholesky wrapper (CHOLMOD through cholespy), factored once, solved many times
 transfer    deformation transfer (Sumner & Popovic 2004), factored once for all shapes
 rig         the :class:`Rig` type, rig folders

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, SolverError, named_params
+from ..errors import InputError, named_params, parameter_error
 from .rigid import Similarity, _rotation_from_vector
 
 
@@ -209,6 +209,15 @@ def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=N
     return box_qp(H, g, lb, ub, start)
 
 
+def check_box(lb: np.ndarray, ub: np.ndarray) -> None:
+    """Refuse bounds with a lower above its upper (or NaN) in one line, before any work."""
+    lb, ub = np.asarray(lb, float), np.asarray(ub, float)
+    bad = np.flatnonzero(~(lb <= ub))
+    if bad.size:
+        raise parameter_error("bounds", "lower <= upper for every unknown",
+                              f"lower {lb[bad[0]]:g} > upper {ub[bad[0]]:g} at unknown {bad[0]} ({bad.size} such)")
+
+
 def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None, pivots: int = 25) -> np.ndarray:
     """``argmin 1/2 x^T H x - g^T x`` within ``lb <= x <= ub`` (H (q, q) positive definite; infinite bounds
     allowed), exactly.
@@ -219,7 +228,7 @@ def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=N
     multiplier has the wrong sign; stop when none does (the KKT conditions hold, so this is the unique
     minimiser). A guess from the previous Gauss-Newton step (``start``) settles in one or two solves. Full
     exchanges may cycle: after ``pivots`` solves, or a singular block, DAQP (Arnström, Bemporad & Axehill
-    2022, an exact dual active-set method; the package's other box QP solver, :mod:`facebasis.rigging.boxqp`)
+    2022, an exact dual active-set method; the package's box QP solver, :mod:`.boxqp`)
     solves it instead.
 
     Parameters
@@ -235,6 +244,7 @@ def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=N
     """
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
+    check_box(lb, ub)
     tol = 1e-11 * max(1.0, float(np.abs(g).max()))
     try:
         if start is None:
@@ -261,17 +271,11 @@ def box_qp(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=N
 
 
 def _daqp(H, g, lb, ub) -> np.ndarray:
-    """:func:`box_qp` by DAQP, clipped into the bounds."""
-    import daqp
+    """:func:`box_qp` by the package's DAQP box-QP solver (:func:`facebasis.geometry.boxqp.solve_box_qp`,
+    which minimises ``1/2 x^T H x + g^T x``: hence ``-g``)."""
+    from .boxqp import solve_box_qp
 
-    q = len(g)
-    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), -np.ascontiguousarray(g, dtype=np.float64),
-                               np.zeros((0, q)), np.ascontiguousarray(ub, dtype=np.float64),
-                               np.ascontiguousarray(lb, dtype=np.float64), np.zeros(q, dtype=np.int32),
-                               primal_tol=1e-12, dual_tol=1e-12, eps_prox=-1.0)
-    if flag not in (1, 2):
-        raise SolverError(f"model fit: the bounded step's QP failed (DAQP exit flag {flag}, {q} unknowns)", str(flag))
-    return np.clip(np.asarray(x, np.float64), lb, ub)
+    return solve_box_qp(H, -np.asarray(g, np.float64), lb, ub).x
 
 
 class DenseBasis:
@@ -321,6 +325,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     sigma = np.ones(K) if sigma is None else np.broadcast_to(np.asarray(sigma, float), (K,))
     lo, hi = (np.full(K, -np.inf), np.full(K, np.inf)) if bounds is None else (
         np.broadcast_to(np.asarray(bounds[0], float), (K,)), np.broadcast_to(np.asarray(bounds[1], float), (K,)))
+    check_box(lo, hi)
     c = np.clip(np.zeros(K) if c0 is None else np.asarray(c0, float), lo, hi)
     use = np.arange(n) if use is None else np.asarray(use)
     if len(use) > options.samples:  # a seeded sample of the vertices: the fit has few unknowns

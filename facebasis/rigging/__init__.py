@@ -16,10 +16,10 @@ generation     precompute once (``TemplatePart``, ``ExamplePart``), alternate th
 weightproblem  the eq. 5 weight problem (``WeightProblem``: data in one layout, objective, residuals,
                pair checks) and its solutions (``WeightSolution``)
 certify        the certified solve of a weight step (``certify_problem``: branch and bound over
-               exclusive pairs, ``problem -> WeightSolution``)
+               exclusive pairs, ``problem -> WeightSolution``; its nodes' box QPs by
+               :mod:`facebasis.geometry.boxqp`)
 weights        the IPOPT solve of a weight step (``WeightSolver.solve_problem``: the CasADi model
                of eq. 5, polished by ``certify_problem``; ``problem -> WeightSolution``)
-boxqp          exact convex box-constrained QPs (DAQP + active-set refinement), the tree's nodes
 formulations   IPOPT formulations of complementarity compared against the certified optimum
 examples       training inputs: example meshes, rough-weight files, exclusive pairs
 runs           writing a generation run as a rig folder (weights, history, residuals, glTF)

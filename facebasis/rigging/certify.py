@@ -21,7 +21,7 @@ global optimum:
 
 Nodes are explored best-bound first, so when the tree closes the smallest open bound is the
 certificate: ``lower_bound <= f* <= objective`` with ``objective - lower_bound <= gap_tol``.
-Each branch's box-QP is solved exactly by :func:`facebasis.rigging.boxqp.solve_box_qp`.
+Each branch's box-QP is solved exactly by :func:`facebasis.geometry.boxqp.solve_box_qp`.
 
 References
 ----------
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, SolverError
-from .boxqp import DAQP_OK, solve_box_qp
+from ..geometry.boxqp import DAQP_OK, solve_box_qp
 from .weightproblem import ExampleResiduals, WeightProblem, WeightSolution
 
 

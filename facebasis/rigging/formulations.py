@@ -156,7 +156,7 @@ def cancel_pairs(problem: WeightProblem, tol: float = 0.0) -> FormulationResult:
     """The cancel-pairs heuristic on one example's problem (module docstring).
 
     Each round solves the box QP ``min 1/2 x^T H x + g^T x``, ``0 <= x <= hi`` exactly
-    (:func:`facebasis.rigging.boxqp.solve_box_qp`, H and g from eq. 5 via ``problem``), then sets
+    (:func:`facebasis.geometry.boxqp.solve_box_qp`, H and g from eq. 5 via ``problem``), then sets
     ``hi = 0`` for the smaller weight of every pair whose product exceeds ``tol``; it ends when none
     does (at most one round per pair, since a cancelled weight stays at 0).
 
@@ -171,7 +171,7 @@ def cancel_pairs(problem: WeightProblem, tol: float = 0.0) -> FormulationResult:
         ``formulation="cancel-pairs"``, ``iterations`` = box QPs solved, one ``statuses`` entry per
         round ("box QP optimal").
     """
-    from .boxqp import solve_box_qp
+    from ..geometry.boxqp import solve_box_qp
 
     if problem.m != 1:
         raise InputError(f"cancel-pairs: expected one example, found {problem.m}")

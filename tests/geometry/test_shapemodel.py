@@ -235,3 +235,15 @@ def test_bounded_step_is_the_bounded_least_squares_minimiser(monkeypatch):
     monkeypatch.setattr(sm, "_daqp", None)  # pivoting alone settles (no fallback)
     for x in (box_qp(H, g, lb, ub), box_qp(H, g, lb, ub, right), box_qp(H, g, lb, ub, wrong), daqp_only):
         np.testing.assert_allclose(x, ref, rtol=0, atol=1e-9)
+
+
+def test_bounds_with_a_lower_above_its_upper_are_refused_before_any_work():
+    """A box whose lower bound exceeds its upper one has no point: one line naming the unknown, both in
+    the QP and in the model fit (it used to return a point outside one of the bounds)."""
+    from facebasis.geometry.shapemodel import box_qp, fit_shape_model
+
+    with pytest.raises(InputError, match=r"^bounds: expected lower <= upper .*found lower 1 > upper 0 at unknown 0"):
+        box_qp(np.eye(2), np.ones(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+    V = np.zeros((4, 3))
+    with pytest.raises(InputError, match=r"^bounds: .*at unknown 1 \(1 such\)"):
+        fit_shape_model(V, np.zeros((2, 4, 3)), None, None, 1.0, bounds=(np.array([0.0, 2.0]), np.array([1.0, 1.0])))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facebasis.rigging.boxqp import box_qp_kkt, solve_box_qp
+from facebasis.geometry.boxqp import box_qp_kkt, solve_box_qp
 from facebasis.rigging.certify import brute_force_weights, certified_weights
 from facebasis.rigging.weightproblem import WeightProblem
 from facebasis.errors import InputError, SolverError

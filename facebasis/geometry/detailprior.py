@@ -108,7 +108,9 @@ class DetailPriorOptions:
         the modes cannot express, which a weak prior would hand to the modes)
     unseen : after the normal stage, the vertices without scan surface (the sockets, holes) get the fit's
         modes plus the seen detail's extension in 3D (:mod:`.unseen`, eq. U1). False: what the field's
-        eigenfunctions and the normal stage put there (the previous pipeline)
+        eigenfunctions and the normal stage put there (the previous pipeline). Acts only when the stage
+        after the fits is the normal one alone (``after_model="normal"``, the default): after the free
+        non-rigid ICP the offsets are not along the normals
     unseen_samples : at most this many seen vertices condition that extension (a seeded sample)
     """
 

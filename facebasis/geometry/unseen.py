@@ -84,17 +84,18 @@ def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, s
     return Y
 
 
-def extend_unseen(reg, fit, res, surface, after_model: bool):
+def extend_unseen(reg, fit, res, surface, identity_fit: bool):
     """The stage result ``res`` (:class:`.normalstage.NormalStageResult` or the non-rigid one) of a neutral
     registered through the identity fit ``fit`` with the detail prior, its skin vertices without scan
     surface set by :func:`extend_normal_offset` (``fit.detail_sd`` is ``s``; ``reg._detail_prior.length``
-    ``l``). Unchanged unless ``reg.options.detail.unseen``, the fit carried the detail field
+    ``l``). Unchanged unless ``identity_fit`` (the scan was fitted in the identity space, not as an
+    expression), ``reg.options.detail.unseen``, the fit carried the detail field
     (``detail_sd > 0``) and the last stage was the normal one (the free non-rigid stage's points slide
     along the skin: its offsets are not along the normals)."""
     import dataclasses
 
     opts = reg.options.detail
-    if (not after_model or fit is None or not opts.unseen or not getattr(fit, "detail_sd", 0.0) > 0
+    if (not identity_fit or fit is None or not opts.unseen or not getattr(fit, "detail_sd", 0.0) > 0
             or reg.options.after_model != "normal"):
         return res
     noise_ratio = (fit.rms / fit.detail_sd) ** 2

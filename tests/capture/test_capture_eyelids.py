@@ -160,8 +160,9 @@ def test_eyes_blink_with_a_detector(blink):
 
 def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeypatch):
     """--detected-lids: bad values are one line naming the option before any work, given twice is
-    refused; --detected-lids and --no-lid-search reach TrackerOptions, and without them the library's
-    defaults apply."""
+    refused, and without --detector (nothing to act on) it is refused before any work; with a detector
+    --detected-lids and --no-lid-search reach TrackerOptions, and without them the library's defaults
+    apply."""
     import cv2
 
     import facebasis.capture.tracker as tracker
@@ -185,11 +186,29 @@ def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeyp
         assert not out.exists()
     parser_refuses(main, [*base, "--out", str(tmp_path / "twice"), "--detected-lids", "1", "--detected-lids", "0"],
                    capsys, "--detected-lids")
+    out = tmp_path / "no_detector"
+    assert main([*base, "--out", str(out), "--detected-lids", "0.25"]) == 2
+    err = capsys.readouterr().err
+    assert err == "error: --detected-lids: expected together with --detector, found tracking only (--landmarks)\n"
+    assert not out.exists()
+
+    class Truth:         # a detector stand-in: the synthetic truth of each frame, in order
+        def __init__(self):
+            self.i = 0
+
+        def detect(self, frame, near=None):
+            self.i += 1
+            return seq.landmarks[min(self.i - 1, len(seq.landmarks) - 1)].copy()
+
+    import facebasis.capture.detect as detect
+
+    monkeypatch.setattr(detect, "get_detector", lambda name, *a, **k: Truth())
     seen = []
     real = tracker.capture
     monkeypatch.setattr(tracker, "capture", lambda *a, **k: seen.append(
         (k["options"].detected_lids, k["options"].lid_search)) or real(*a, **k))
-    assert main([*base, "--out", str(tmp_path / "o1"), "--detected-lids", "0.25", "--no-lid-search"]) == 0
+    with_det = ["capture", str(d), "--detector", "dlib", "--no-overlay", "--no-progress"]
+    assert main([*with_det, "--out", str(tmp_path / "o1"), "--detected-lids", "0.25", "--no-lid-search"]) == 0
     assert main([*base, "--out", str(tmp_path / "o2")]) == 0
     assert main([*base, "--out", str(tmp_path / "o3"), "--no-lid-search", "--no-lid-search"]) == 0
     assert seen == [(0.25, False), (TrackerOptions().detected_lids, True), (TrackerOptions().detected_lids, False)]

@@ -218,13 +218,23 @@ class LidSearch:
         return np.where(best >= self.zncc, z, complex(np.nan, np.nan))
 
 
+def check_lid_options(options) -> None:
+    """Refuse bad ``detected_lids`` / ``lid_search`` of a
+    :class:`facebasis.capture.options.TrackerOptions` (raises ``InputError``); called by the tracker with
+    its other option checks, before any work."""
+    gain = options.detected_lids
+    if isinstance(gain, bool) or not isinstance(gain, (int, float, np.floating)) or not 0.0 <= gain <= 1.0:
+        raise parameter_error("detected_lids", "a number in [0, 1]", repr(gain))
+    if not isinstance(options.lid_search, (bool, np.bool_)):
+        raise parameter_error("lid_search", "True or False", repr(options.lid_search))
+
+
 def eyelid_model(gray: np.ndarray, lm: np.ndarray, scale: float, options) -> Eyelids:
     """The eyelid model of a take from frame 0 ``gray`` (H, W) and its landmarks ``lm`` (L, 2), the face
     scale and :class:`facebasis.capture.options.TrackerOptions` (``detected_lids``, ``lid_search``)."""
-    if not isinstance(options.lid_search, (bool, np.bool_)):
-        raise parameter_error("lid_search", "True or False", repr(options.lid_search))
+    check_lid_options(options)
     search = LidSearch(gray, lm, LID_BLUR * scale) if options.lid_search and len(lm) == 68 else None
     return Eyelids(len(lm), options.detected_lids, search, None if search is None else search.z0)
 
 
-__all__ = ["EYE_CORNERS", "EYE_LIDS", "Eyelids", "LidSearch", "eyelid_model", "lid_coordinates", "place_lids"]
+__all__ = ["EYE_CORNERS", "EYE_LIDS", "Eyelids", "LidSearch", "check_lid_options", "eyelid_model", "lid_coordinates", "place_lids"]

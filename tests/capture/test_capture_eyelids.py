@@ -56,16 +56,29 @@ def test_detected_lids_follow_the_detection_on_the_tracked_corners():
     assert Eyelids(5, 1.0).follow(tracked[:5], det[:5]) is not None
 
 
+def _no_work(monkeypatch):
+    """Make any work of FaceTracker (decoding frame 0, building the mesh) fail the test."""
+    import facebasis.capture.tracker as tracker
+
+    def fail(*a, **k):
+        raise AssertionError("work started before the options were checked")
+
+    for name in ("_grays", "build_face_mesh", "eyelid_model"):
+        monkeypatch.setattr(tracker, name, fail)
+
+
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan"), True, "0.5", None])
-def test_detected_lids_bad_values_refused(bad):
+def test_detected_lids_bad_values_refused(bad, monkeypatch):
     img, lm = cartoon_face((128, 128))
+    _no_work(monkeypatch)
     with pytest.raises(InputError, match=r"^detected_lids: expected a number in \[0, 1\], found"):
         FaceTracker(img, lm, TrackerOptions(detected_lids=bad))
 
 
 @pytest.mark.parametrize("bad", ["yes", 1, None])
-def test_lid_search_bad_values_refused(bad):
+def test_lid_search_bad_values_refused(bad, monkeypatch):
     img, lm = cartoon_face((128, 128))
+    _no_work(monkeypatch)
     with pytest.raises(InputError, match=r"^lid_search: expected True or False, found"):
         FaceTracker(img, lm, TrackerOptions(lid_search=bad))
 

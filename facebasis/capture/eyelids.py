@@ -93,9 +93,9 @@ class Eyelids:
         self._z = None     # complex (2, 4): last frame's coordinates
 
     def follow(self, lm: np.ndarray, detections: np.ndarray | None, filt=None, gray=None) -> np.ndarray:
-        """Landmarks ``(68, 2)`` with the lids placed from ``detections`` ``(68, 2)`` (or the tracker's own
-        where an eye was not detected); without a detection, where the :class:`LidSearch` (if any) finds
-        them on ``gray``. ``filt`` (a :class:`facebasis.capture.particle.CondensationFilter`) is moved
+        """Landmarks ``(68, 2)`` with the lids placed from ``detections`` ``(68, 2)``; without a detection
+        (or for an eye whose points the detection leaves NaN), where the :class:`LidSearch` (if any)
+        finds them on ``gray``, else the tracker's own across the eye at frame 0's along-eye place. ``filt`` (a :class:`facebasis.capture.particle.CondensationFilter`) is moved
         along so the next frame starts from the placed lids."""
         if (detections is None or not self.active) and self.z0 is None and (self.search is None or gray is None):
             self._z = None
@@ -103,16 +103,15 @@ class Eyelids:
         own = lid_coordinates(lm)
         frame_ok = np.all(np.isfinite(own), axis=1, keepdims=True)     # (2, 1): the eye's corners apart
         if detections is None or not self.active:
-            if self.z0 is not None:     # along the eye the lid line gives no evidence: frame 0's place
-                own = self.z0.real + 1j * own.imag
-            z = own if self.search is None or gray is None else self.search.search(gray, lm)
-            z = np.where(np.isfinite(z), z, own)
+            z = self._undetected(own, lm, gray)
         else:
             det = lid_coordinates(np.asarray(detections, float))
             prev = own if self._z is None else np.where(np.isfinite(self._z), self._z, own)
             seen = np.all(np.isfinite(det), axis=1, keepdims=True)
-            z = np.where(seen, prev + self.gain * (np.where(seen, det, 0) - prev), own)
-            z = np.where(np.isfinite(z), z, own)
+            # an eye the detector missed is placed as on a frame without a detection
+            fallback = own if seen.all() else self._undetected(own, lm, gray)
+            z = np.where(seen, prev + self.gain * (np.where(seen, det, 0) - prev), fallback)
+            z = np.where(np.isfinite(z), z, fallback)
         z = np.where(frame_ok, z, np.nan)
         self._z = z
         out = place_lids(lm, z)
@@ -120,6 +119,16 @@ class Eyelids:
         if filt is not None:
             filt.place(EYE_LIDS.ravel(), out[EYE_LIDS.ravel()])
         return out
+
+
+    def _undetected(self, own: np.ndarray, lm: np.ndarray, gray) -> np.ndarray:
+        """Lid coordinates (2, 4) complex without a detection: the :class:`LidSearch`'s where it finds
+        the lid, else the tracker's ``own`` across the eye at frame 0's along-eye coordinate (if
+        ``z0`` is known; the lid line gives no evidence along itself)."""
+        if self.z0 is not None:
+            own = self.z0.real + 1j * own.imag
+        z = own if self.search is None or gray is None else self.search.search(gray, lm)
+        return np.where(np.isfinite(z), z, own)
 
 
 class LidSearch:

@@ -45,15 +45,19 @@ def test_detected_lids_follow_the_detection_on_the_tracked_corners():
     first = lids.follow(tracked, det)
     assert np.allclose(first[[37, 38]], tracked[[37, 38]] + [0, 1.0])
     assert np.allclose(lids.follow(tracked, det)[[37, 38]], tracked[[37, 38]] + [0, 1.5])
-    # an eye the detector missed keeps the tracker's own lids; the other eye is still placed
+    # an eye the detector missed keeps the tracker's own lids (no search, no frame 0 given); the
+    # other eye is still placed from its detection
     half = det.copy()
     half[36:42] = np.nan
+    half[[43, 44]] += [0, 1.5]
     out = Eyelids(68, 1.0).follow(tracked, half)
-    assert np.allclose(out, tracked)
+    assert np.allclose(out[[43, 44]], lm[[43, 44]] + [4.0, 0.5])
+    assert np.allclose(np.delete(out, [43, 44], 0), np.delete(tracked, [43, 44], 0))
     # off: gain 0, no detection, or not 68 points
     assert Eyelids(68, 0.0).follow(tracked, det) is tracked
     assert Eyelids(68, 1.0).follow(tracked, None) is tracked
-    assert Eyelids(5, 1.0).follow(tracked[:5], det[:5]) is not None
+    small = tracked[:5]
+    assert Eyelids(5, 1.0).follow(small, det[:5]) is small
 
 
 def _no_work(monkeypatch):
@@ -169,6 +173,27 @@ def test_eyes_blink_with_a_detector(blink):
     assert np.corrcoef(e, truth)[0, 1] >= 0.97
     old = eye_opening(_track(blink, TrackerOptions(detected_lids=0.0, lid_search=False), noise=0.5))
     assert np.abs(old - truth).max() > 0.2 * amp and np.abs(old - truth).mean() > 0.08 * amp
+
+
+def test_eyes_blink_with_a_detector_that_misses_one_eye(blink):
+    """A detector stand-in (truth plus 0.5 px noise, seeded) that never finds eye 0 (its six points
+    NaN): that eye's lids are placed as without a detector (the lid search), so its opening follows the
+    covering lid within 20 % of its amplitude in every frame, as tracking only does (measured 13 % max,
+    3 % mean of 6.9 px, r 0.993). The tracker's own sliding lids (the earlier fallback) were 115 % off
+    at worst, r -0.13 (the bound is the tracking-only test's)."""
+    truth = np.linalg.norm(blink.landmarks[:, [37, 38]] - blink.landmarks[:, [41, 40]], axis=-1).mean(1)
+    amp = np.ptp(truth)
+    rng = np.random.default_rng(0)
+    tr = FaceTracker(blink.frames[0], blink.landmarks[0], TrackerOptions())
+    out = [blink.landmarks[0]]
+    for t in range(1, len(blink.frames)):
+        det = blink.landmarks[t] + rng.normal(0.0, 0.5, (68, 2))
+        det[36:42] = np.nan
+        out.append(tr.track(blink.frames[t], det).landmarks)
+    lm = np.stack(out)
+    e = np.linalg.norm(lm[:, [37, 38]] - lm[:, [41, 40]], axis=-1).mean(1)
+    assert np.abs(e - truth).max() <= 0.2 * amp
+    assert np.corrcoef(e, truth)[0, 1] >= 0.95
 
 
 def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeypatch):

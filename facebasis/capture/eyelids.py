@@ -39,6 +39,13 @@ EYE_LIDS = np.array([[37, 38, 40, 41], [43, 44, 46, 47]], np.int64)
 #: lid search: half width of the profile along the eye (corner distances), candidate shifts on each
 #: side of the first-frame position, smallest accepted ZNCC
 LID_HALF_WIDTH, LID_STEPS, LID_ZNCC, LID_PRIOR = 0.08, 16, 0.5, 0.2
+#: lid search of an eye closed or squinting on frame 0 (lid gap under LID_SQUINT corner distances):
+#: its profiles and search steps are scaled by LID_OPEN_TYPICAL instead of its gap, and its lids may
+#: open up to LID_OPEN_WIDE. An open adult eye is ~10 mm high for ~30 mm between the corners (0.3-0.35;
+#: dlib's frame-0 landmarks on the benchmark faces: 0.24-0.39, the synthetic cartoon's 0.37), a wide
+#: open eye ~0.45, a squint under 0.2. The earlier floor of 0.02 left a closed eye a search range
+#: under a pixel, and its lids never opened. Eyes open on frame 0 are searched as before.
+LID_SQUINT, LID_OPEN_TYPICAL, LID_OPEN_WIDE = 0.2, 0.3, 0.45
 #: blur of the image the lid profiles are sampled on (pixels at reference face size)
 LID_BLUR = 0.5
 
@@ -93,9 +100,9 @@ class Eyelids:
         self._z = None     # complex (2, 4): last frame's coordinates
 
     def follow(self, lm: np.ndarray, detections: np.ndarray | None, filt=None, gray=None) -> np.ndarray:
-        """Landmarks ``(68, 2)`` with the lids placed from ``detections`` ``(68, 2)`` (or the tracker's own
-        where an eye was not detected); without a detection, where the :class:`LidSearch` (if any) finds
-        them on ``gray``. ``filt`` (a :class:`facebasis.capture.particle.CondensationFilter`) is moved
+        """Landmarks ``(68, 2)`` with the lids placed from ``detections`` ``(68, 2)``; without a detection
+        (or for an eye whose points the detection leaves NaN), where the :class:`LidSearch` (if any)
+        finds them on ``gray``, else the tracker's own across the eye at frame 0's along-eye place. ``filt`` (a :class:`facebasis.capture.particle.CondensationFilter`) is moved
         along so the next frame starts from the placed lids."""
         if (detections is None or not self.active) and self.z0 is None and (self.search is None or gray is None):
             self._z = None
@@ -103,16 +110,15 @@ class Eyelids:
         own = lid_coordinates(lm)
         frame_ok = np.all(np.isfinite(own), axis=1, keepdims=True)     # (2, 1): the eye's corners apart
         if detections is None or not self.active:
-            if self.z0 is not None:     # along the eye the lid line gives no evidence: frame 0's place
-                own = self.z0.real + 1j * own.imag
-            z = own if self.search is None or gray is None else self.search.search(gray, lm)
-            z = np.where(np.isfinite(z), z, own)
+            z = self._undetected(own, lm, gray)
         else:
             det = lid_coordinates(np.asarray(detections, float))
             prev = own if self._z is None else np.where(np.isfinite(self._z), self._z, own)
             seen = np.all(np.isfinite(det), axis=1, keepdims=True)
-            z = np.where(seen, prev + self.gain * (np.where(seen, det, 0) - prev), own)
-            z = np.where(np.isfinite(z), z, own)
+            # an eye the detector missed is placed as on a frame without a detection
+            fallback = own if seen.all() else self._undetected(own, lm, gray)
+            z = np.where(seen, prev + self.gain * (np.where(seen, det, 0) - prev), fallback)
+            z = np.where(np.isfinite(z), z, fallback)
         z = np.where(frame_ok, z, np.nan)
         self._z = z
         out = place_lids(lm, z)
@@ -120,6 +126,16 @@ class Eyelids:
         if filt is not None:
             filt.place(EYE_LIDS.ravel(), out[EYE_LIDS.ravel()])
         return out
+
+
+    def _undetected(self, own: np.ndarray, lm: np.ndarray, gray) -> np.ndarray:
+        """Lid coordinates (2, 4) complex without a detection: the :class:`LidSearch`'s where it finds
+        the lid, else the tracker's ``own`` across the eye at frame 0's along-eye coordinate (if
+        ``z0`` is known; the lid line gives no evidence along itself)."""
+        if self.z0 is not None:
+            own = self.z0.real + 1j * own.imag
+        z = own if self.search is None or gray is None else self.search.search(gray, lm)
+        return np.where(np.isfinite(z), z, own)
 
 
 class LidSearch:
@@ -144,7 +160,10 @@ class LidSearch:
         v = self.z0.imag
         gap = 0.5 * ((v[:, 3] - v[:, 0]) + (v[:, 2] - v[:, 1]))       # (2,) signed: the corners' order
         self.down = np.where(gap < 0, -1.0, 1.0)                       # eye-frame sign of "towards the lower lid"
-        self.open0 = np.maximum(np.abs(gap), 0.02)
+        closed = np.abs(gap) < LID_SQUINT                              # (2,) closed or squinting on frame 0
+        self.open0 = np.where(closed, LID_OPEN_TYPICAL, np.abs(gap))
+        # towards opening each lid may travel 0.6 of the opening; a closed eye's up to a wide open eye
+        reach = np.where(closed, (LID_OPEN_WIDE - np.abs(gap)) / self.open0, 0.6)    # (2,) openings
         u = np.linspace(-LID_HALF_WIDTH, LID_HALF_WIDTH, 5)
         # across the lid line mostly on the side away from the eye (skin, lashes), which a closing
         # lid does not change: upper lids from 0.6 opening above to 0.2 below, lower lids mirrored
@@ -153,9 +172,9 @@ class LidSearch:
         # (2, 4, S) complex offsets in eye-frame units: along the eye by u, across by w
         self.offsets = (u[None, None, :, None] + 1j * w[:, :, None, :]).reshape(2, 4, -1)
         steps = np.linspace(-1.0, 1.0, 2 * LID_STEPS + 1)
-        # upper lids (first two) search further down, lower lids further up: (4, K) in openings
-        self.shifts = np.stack([np.interp(steps, [-1, 0, 1], [-0.6, 0, 1.0])] * 2
-                               + [np.interp(steps, [-1, 0, 1], [-1.0, 0, 0.6])] * 2)
+        # upper lids (first two) search further down, lower lids further up: (2, 4, K) in openings
+        self.shifts = np.stack([np.stack([np.interp(steps, [-1, 0, 1], [-r, 0, 1.0])] * 2
+                                         + [np.interp(steps, [-1, 0, 1], [-1.0, 0, r])] * 2) for r in reach])
         self.template = self._sample(gray, lm, self.z0[..., None])[..., 0, :]       # (2, 4, S)
 
     def _sample(self, gray, lm, z):
@@ -187,7 +206,7 @@ class LidSearch:
         own = lid_coordinates(lm)
         v0 = self.z0.imag
         scale = (self.down * self.open0)[:, None, None]
-        cand = self.z0.real[..., None] + 1j * (v0[..., None] + self.shifts[None] * scale)
+        cand = self.z0.real[..., None] + 1j * (v0[..., None] + self.shifts * scale)
         prof = self._sample(gray, lm, cand)                                     # (2, 4, K, S)
         zn = (_normalise(prof) * _normalise(self.template)[:, :, None, :]).sum(-1)   # (2, 4, K)
         # one shift per lid (its two points move together), scored by their mean ZNCC less a
@@ -195,17 +214,17 @@ class LidSearch:
         zn = 0.5 * (zn[:, [0, 2]] + zn[:, [1, 3]])                               # (2, 2, K): upper, lower
         tracked = (own.imag - v0) / scale[..., 0]                                # (2, 4) in openings
         prior = 0.5 * (tracked[:, [0, 2]] + tracked[:, [1, 3]])
-        sh = self.shifts[[0, 2]]                                                 # (2, K)
-        score = zn - LID_PRIOR * (sh[None] - prior[..., None]) ** 2
+        sh = self.shifts[:, [0, 2]]                                              # (2, 2, K)
+        score = zn - LID_PRIOR * (sh - prior[..., None]) ** 2
         k = np.argmax(score, -1)
         best = np.take_along_axis(zn, k[..., None], -1)[..., 0]                  # (2, 2)
-        km, kp = np.clip(k - 1, 0, sh.shape[1] - 1), np.clip(k + 1, 0, sh.shape[1] - 1)
+        km, kp = np.clip(k - 1, 0, sh.shape[-1] - 1), np.clip(k + 1, 0, sh.shape[-1] - 1)
         f = lambda i: np.take_along_axis(score, i[..., None], -1)[..., 0]
         a, b_, c = f(km), f(k), f(kp)
         den = a - 2 * b_ + c
         frac = np.where((den < -1e-9) & (km < k) & (kp > k), 0.5 * (a - c) / np.where(den < -1e-9, den, -1.0), 0.0)
-        step = sh[:, 1] - sh[:, 0]                                               # (2,)
-        shift = np.take_along_axis(np.broadcast_to(sh, (2, 2, sh.shape[1])), k[..., None], -1)[..., 0] + frac * step
+        step = sh[..., 1] - sh[..., 0]                                           # (2, 2)
+        shift = np.take_along_axis(sh, k[..., None], -1)[..., 0] + frac * step
         shift4 = shift[:, [0, 0, 1, 1]] * scale[..., 0]
         best = best[:, [0, 0, 1, 1]]
         z = self.z0.real + 1j * (v0 + shift4)
@@ -218,13 +237,23 @@ class LidSearch:
         return np.where(best >= self.zncc, z, complex(np.nan, np.nan))
 
 
+def check_lid_options(options) -> None:
+    """Refuse bad ``detected_lids`` / ``lid_search`` of a
+    :class:`facebasis.capture.options.TrackerOptions` (raises ``InputError``); called by the tracker with
+    its other option checks, before any work."""
+    gain = options.detected_lids
+    if isinstance(gain, bool) or not isinstance(gain, (int, float, np.floating)) or not 0.0 <= gain <= 1.0:
+        raise parameter_error("detected_lids", "a number in [0, 1]", repr(gain))
+    if not isinstance(options.lid_search, (bool, np.bool_)):
+        raise parameter_error("lid_search", "True or False", repr(options.lid_search))
+
+
 def eyelid_model(gray: np.ndarray, lm: np.ndarray, scale: float, options) -> Eyelids:
     """The eyelid model of a take from frame 0 ``gray`` (H, W) and its landmarks ``lm`` (L, 2), the face
     scale and :class:`facebasis.capture.options.TrackerOptions` (``detected_lids``, ``lid_search``)."""
-    if not isinstance(options.lid_search, (bool, np.bool_)):
-        raise parameter_error("lid_search", "True or False", repr(options.lid_search))
+    check_lid_options(options)
     search = LidSearch(gray, lm, LID_BLUR * scale) if options.lid_search and len(lm) == 68 else None
     return Eyelids(len(lm), options.detected_lids, search, None if search is None else search.z0)
 
 
-__all__ = ["EYE_CORNERS", "EYE_LIDS", "Eyelids", "LidSearch", "eyelid_model", "lid_coordinates", "place_lids"]
+__all__ = ["EYE_CORNERS", "EYE_LIDS", "Eyelids", "LidSearch", "check_lid_options", "eyelid_model", "lid_coordinates", "place_lids"]

@@ -81,7 +81,9 @@ class TrackerOptions:
         ``z_t = z_{t-1} + g (z_det - z_{t-1})`` of its detected coordinate there
         (:mod:`facebasis.capture.eyelids`), so the eyes blink when the detector sees a blink. 0: the
         lids are tracked as without a detector (the filter, trusting Lucas-Kanade and the drift
-        correction against the open first-frame eye, barely let a detection move them).
+        correction against the open first-frame eye, barely let a detection move them). Acts only on frames
+        with a detection (an eye the detector missed, or tracking only, places the lids as
+        ``lid_search`` says); the ``capture`` command refuses it without a detector.
     lid_search : bool
         Without a detection (tracking only, or a frame the detector missed), keep each lid point at
         its first-frame place along the eye and search the lid across the eye for the first-frame look

@@ -19,7 +19,7 @@ import numpy as np
 from facebasis.errors import InputError, parameter_error
 
 from .facemesh import FaceMesh, build_face_mesh
-from .eyelids import eyelid_model
+from .eyelids import check_lid_options, eyelid_model
 from .harmonic import HarmonicDeformer
 from .inputs import CaptureResult, check_capture_args
 from .landmarks import (
@@ -103,6 +103,7 @@ class FaceTracker:
         if not (np.isfinite(options.outlier_distance) and options.outlier_distance >= 0):
             raise InputError(f"outlier_distance: expected a number >= 0 (face widths; 0 = off), "
                              f"found {options.outlier_distance!r}")
+        check_lid_options(options)
         gray, gray8 = _grays(first_frame)
         h, w = gray.shape
         lm = validate_landmarks(landmarks, "landmarks", size=(w, h))

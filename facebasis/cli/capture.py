@@ -112,6 +112,9 @@ def cmd_capture(args) -> int:
             lids = float("nan")
         if not 0 <= lids <= 1:
             raise InputError(f"--detected-lids: expected a number in [0, 1], found {args.detected_lids!r}")
+        if args.detector is None:     # without detections the option has nothing to act on
+            raise InputError("--detected-lids: expected together with --detector, found tracking only "
+                             "(--landmarks)")
     max_frames = (None if args.max_frames is None
                   else _int_option(args.max_frames, "--max-frames", 1, "a positive integer"))
     src, lm, det = check_capture_args(args.input, args.landmarks, args.detector, args.out, max_frames, args.fps)

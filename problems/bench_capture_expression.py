@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.bench_capture_real import CLIPS, OUT, VIDEO_DIR, _Replay, detections, errors
+from problems.bench_capture_real import OUT, _Replay, clips_or_shared, detections, errors, write_rows
 from problems.bench_cartoon import FEATURES, correlation, features
 
 #: a frame is a blink frame when dlib's eye opening is below this fraction of its running median
@@ -163,20 +163,13 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", action="store_true", help="also the tracker stages switched off one by one")
     ap.add_argument("--out", default=str(OUT / "expression.csv"))
     a = ap.parse_args(argv)
-    clips = [Path(c) for c in a.clips] or [VIDEO_DIR / c for c in CLIPS]
-    missing = [str(c) for c in clips if not c.exists()]
-    if missing:
-        print(f"clips not found: {', '.join(missing)}; nothing measured")
+    clips = clips_or_shared(a.clips)
+    if clips is None:
         return 0
     rows: list = []
     for clip in clips:
         run_clip(clip, None if a.cache is None else Path(a.cache), a.variants, rows)
-    from facebasis.report.tables import write_dict_csv
-
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_dict_csv(out, [{k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
-    print(f"\nwrote {out}")
+    write_rows(a.out, [{k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()} for r in rows])
     return 0
 
 

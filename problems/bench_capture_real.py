@@ -134,6 +134,26 @@ def run_clip(clip: Path, cache: Path | None, max_frames: int | None, rows: list)
                                                           for k, v in r.items()}})
 
 
+def clips_or_shared(given) -> list[Path] | None:
+    """The clips named on the command line, else the shared ones; None (after saying so) if any is missing."""
+    clips = [Path(c) for c in given] or [VIDEO_DIR / c for c in CLIPS]
+    missing = [str(c) for c in clips if not c.exists()]
+    if missing:
+        print(f"clips not found: {', '.join(missing)}; nothing measured")
+        return None
+    return clips
+
+
+def write_rows(out: str, rows: list) -> None:
+    """The benchmark's rows as a CSV at ``out`` (its folder made)."""
+    from facebasis.report.tables import write_dict_csv
+
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_dict_csv(path, rows)
+    print(f"\nwrote {path}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m problems.bench_capture_real", description=__doc__.split("\n")[0])
     ap.add_argument("clips", nargs="*", help="video files (default: the shared clips)")
@@ -141,20 +161,13 @@ def main(argv=None) -> int:
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--out", default=str(OUT / "real_clips.csv"))
     a = ap.parse_args(argv)
-    clips = [Path(c) for c in a.clips] or [VIDEO_DIR / c for c in CLIPS]
-    missing = [str(c) for c in clips if not c.exists()]
-    if missing:
-        print(f"clips not found: {', '.join(missing)}; nothing measured")
+    clips = clips_or_shared(a.clips)
+    if clips is None:
         return 0
     rows: list = []
     for clip in clips:
         run_clip(clip, None if a.cache is None else Path(a.cache), a.max_frames, rows)
-    from facebasis.report.tables import write_dict_csv
-
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_dict_csv(out, rows)
-    print(f"\nwrote {out}")
+    write_rows(a.out, rows)
     return 0
 
 

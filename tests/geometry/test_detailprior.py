@@ -37,18 +37,28 @@ def test_the_eigenbasis_is_smooth_along_the_normals_orthonormal_and_deterministi
     assert s.shape == (12,) and np.all(np.diff(s) <= 0) and s[0] == pytest.approx(0.1 * np.sqrt(2 * np.pi) * prior.length)
 
 
-def _person_with_detail(k=12):
-    from test_shapemodel import as_scan, face, modes
+def person_parts(k=12):
+    """The built-in face ``T, F``, ``k`` modes ``D``, coefficients ``c``, the person's normals ``n``, a smooth
+    field ``f`` of 8 bumps on the front (2.5 mm at most, along the normals) and the front's vertices:
+    the person is ``T + c D + f n``."""
+    from test_shapemodel import face, modes
 
     rig = face()
     T, F = rig.neutral, rig.faces
     D = modes(T, k)
     c = np.random.default_rng(1).standard_normal(k)
     n = NonRigidICP(F, len(T)).vertex_normals(T + np.tensordot(c, D, 1))
-    rng = np.random.default_rng(7)  # a smooth field of 8 bumps on the front, 2.5 mm at most, along the normals
+    rng = np.random.default_rng(7)
     front = np.flatnonzero(T[:, 2] > np.median(T[:, 2]))
     f = np.exp(-((T[:, None] - T[rng.choice(front, 8)][None]) ** 2).sum(2) / 2.0) @ rng.standard_normal(8)
-    person = T + np.tensordot(c, D, 1) + (0.25 / np.abs(f).max()) * f[:, None] * n
+    return T, F, D, c, n, (0.25 / np.abs(f).max()) * f, front
+
+
+def _person_with_detail(k=12):
+    from test_shapemodel import as_scan
+
+    T, F, D, c, n, f, _ = person_parts(k)
+    person = T + np.tensordot(c, D, 1) + f[:, None] * n
     S, G, R, t = as_scan(person, F, seed=1)
     return T, F, ShapeBasis(tuple(f"m{j}" for j in range(k)), D, "test"), c, S, G, person @ R.T + t
 

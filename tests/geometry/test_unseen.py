@@ -13,7 +13,6 @@ from conftest import grid_sheet
 
 from facebasis.errors import InputError
 from facebasis.geometry.detailprior import DetailPriorOptions
-from facebasis.geometry.nricp import NonRigidICP
 from facebasis.geometry.registration import Registration, RegistrationOptions
 from facebasis.geometry.shapemodel import ShapeBasis
 from facebasis.geometry.unseen import extend_normal_offset
@@ -21,17 +20,10 @@ from facebasis.geometry.unseen import extend_normal_offset
 
 def _person_with_a_hole(radius=1.0, k=12, level=0.5):
     """(T, F, basis, scan V, scan F, truth in the scan's frame, the template vertices in the hole)."""
-    from test_shapemodel import as_scan, face, modes
+    from test_detailprior import person_parts
+    from test_shapemodel import as_scan
 
-    rig = face()
-    T, F = rig.neutral, rig.faces
-    D = modes(T, k)
-    c = np.random.default_rng(1).standard_normal(k)
-    n = NonRigidICP(F, len(T)).vertex_normals(T + np.tensordot(c, D, 1))
-    rng = np.random.default_rng(7)  # a smooth field of 8 bumps on the front, 2.5 mm at most, along the normals
-    front = np.flatnonzero(T[:, 2] > np.median(T[:, 2]))
-    f = np.exp(-((T[:, None] - T[rng.choice(front, 8)][None]) ** 2).sum(2) / 2.0) @ rng.standard_normal(8)
-    f *= 0.25 / np.abs(f).max()
+    T, F, D, c, n, f, front = person_parts(k)
     person = T + np.tensordot(c, D, 1) + f[:, None] * n
     centre = front[np.argmin(np.abs(np.abs(f[front]) - level * np.abs(f).max()))]  # on a bump's flank
     hole = np.linalg.norm(T - T[centre], axis=1) < radius

@@ -247,3 +247,20 @@ def stretched(V, sx=1.1, gap=0.3):
     W[:, 0] *= sx
     W[W[:, 2] > 0.1, 2] += gap - 0.6
     return W
+
+
+def capture_cli_inputs(tmp_path, frames=3, size=(96, 96)):
+    """A generated sequence written as a PNG folder with its frame-0 landmarks: ``(seq, folder, base)``,
+    ``base`` the ``capture`` command line tracking it (no overlay, no progress bar) without ``--out``."""
+    import cv2
+
+    from facebasis.capture.landmarks import format_pts
+    from facebasis.capture.synthetic import synthetic_sequence
+
+    seq = synthetic_sequence(frames, size=size)
+    d = tmp_path / "frames"
+    d.mkdir()
+    for i, f in enumerate(seq.frames):
+        cv2.imwrite(str(d / f"f{i:03d}.png"), f[..., ::-1])
+    (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))
+    return seq, d, ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]

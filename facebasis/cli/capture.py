@@ -24,6 +24,14 @@ unless --no-overlay, OUT_DIR/overlay.mp4 with the mesh drawn on the input.
 """
 
 
+def _number(text: str) -> float:
+    """An option's text as a number; NaN where it is none (the caller's range check then refuses it)."""
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
 def _int_option(text: str, flag: str, minimum: int, expected: str) -> int:
     """A whole-number option (``--max-frames``, ``--frame``): InputError naming the flag below ``minimum``."""
     from facebasis.errors import InputError
@@ -98,18 +106,12 @@ def cmd_capture(args) -> int:
         raise InputError(f"--inner-lips: expected one of {', '.join(INNER_LIPS)}, found {args.inner_lips!r}")
     drift_blur = TrackerOptions.drift_blur
     if args.drift_blur is not None:
-        try:
-            drift_blur = float(args.drift_blur)
-        except ValueError:
-            drift_blur = float("nan")
+        drift_blur = _number(args.drift_blur)
         if not (drift_blur >= 0 and drift_blur != float("inf")):
             raise InputError(f"--drift-blur: expected a number of pixels >= 0, found {args.drift_blur!r}")
     lids = TrackerOptions.detected_lids
     if args.detected_lids is not None:
-        try:
-            lids = float(args.detected_lids)
-        except ValueError:
-            lids = float("nan")
+        lids = _number(args.detected_lids)
         if not 0 <= lids <= 1:
             raise InputError(f"--detected-lids: expected a number in [0, 1], found {args.detected_lids!r}")
         if args.detector is None:     # without detections the option has nothing to act on

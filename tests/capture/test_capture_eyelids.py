@@ -215,21 +215,12 @@ def test_cli_lid_options_bad_values_repeat_and_default(tmp_path, capsys, monkeyp
     refused, and without --detector (nothing to act on) it is refused before any work; with a detector
     --detected-lids and --no-lid-search reach TrackerOptions, and without them the library's defaults
     apply."""
-    import cv2
-
     import facebasis.capture.tracker as tracker
-    from facebasis.capture.landmarks import format_pts
     from facebasis.cli import main
 
-    from conftest import parser_refuses
+    from conftest import capture_cli_inputs, parser_refuses
 
-    seq = synthetic_sequence(3, size=(96, 96))
-    d = tmp_path / "frames"
-    d.mkdir()
-    for i, f in enumerate(seq.frames):
-        cv2.imwrite(str(d / f"f{i:03d}.png"), f[..., ::-1])
-    (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))
-    base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
+    seq, d, base = capture_cli_inputs(tmp_path)
     for bad in ("-0.1", "1.5", "nan", "half"):
         out = tmp_path / f"bad{bad}"
         assert main([*base, "--out", str(out), "--detected-lids", bad]) == 2

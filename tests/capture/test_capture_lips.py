@@ -142,21 +142,12 @@ def test_cli_drift_blur_bad_values_repeat_and_default(tmp_path, capsys, monkeypa
     """--drift-blur: bad values are one line naming the option before any work, given twice is refused,
     a good value reaches TrackerOptions, and without it the library's default applies."""
     import facebasis.capture.tracker as tracker
-    from facebasis.capture.landmarks import format_pts
     from facebasis.capture.options import TrackerOptions
     from facebasis.cli import main
 
-    from conftest import parser_refuses
+    from conftest import capture_cli_inputs, parser_refuses
 
-    seq = synthetic_sequence(3, size=(96, 96))
-    import cv2
-
-    d = tmp_path / "frames"
-    d.mkdir()
-    for i, f in enumerate(seq.frames):
-        cv2.imwrite(str(d / f"f{i:03d}.png"), f[..., ::-1])
-    (tmp_path / "first.pts").write_text(format_pts(seq.landmarks[0]))
-    base = ["capture", str(d), "--landmarks", str(tmp_path / "first.pts"), "--no-overlay", "--no-progress"]
+    _, _, base = capture_cli_inputs(tmp_path)
     for bad in ("-0.5", "nan", "inf", "soft"):
         out = tmp_path / f"bad{bad}"
         assert main([*base, "--out", str(out), "--drift-blur", bad]) == 2

@@ -19,7 +19,8 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "region": "--region", "max_frames": "--max-frames", "fps": "--fps", "identity_basis": "--identity-basis",
          "expression_basis": "--expression-basis", "expression_transfer": "--expression-transfer",
          "amplitude": "--amplitude", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
-         "rest_anchor": "--rest-anchor", "focal": "--focal", "noise_model": "--noise-model"}
+         "rest_anchor": "--rest-anchor", "focal": "--focal", "noise_model": "--noise-model",
+         "point_noise": "--point-noise"}
 
 #: a command whose flag for a library parameter is not :data:`FLAGS`'s (``landmarks``' ``--frame`` is
 #: :func:`facebasis.capture.video.read_frame`'s ``index``)

@@ -53,7 +53,8 @@ def cmd_retarget(args) -> int:
                      ridge=args.ridge, neutral=args.neutral,
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
                      preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
-                     rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model)
+                     rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model,
+                     point_noise=args.point_noise)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -78,6 +79,10 @@ def _camera_args(p) -> None:
     p.add_argument("--noise-model", default=None, action=Once, choices=("pixels", "rig"),
                    help="landmark noise of a fixed size in 'pixels' (default: a frame whose face is smaller in the "
                         "image weighs its landmarks less) or in 'rig' units (the former model)")
+    p.add_argument("--point-noise", default=None, action=Once, choices=("per-point", "shared"),
+                   help="'per-point' (default): every landmark's own noise is estimated from the capture and a "
+                        "landmark the rig reproduces worse than the typical one weighs less (a detector's jaw "
+                        "line or brows, an eyelid); 'shared': one noise for all landmarks (the former model)")
 
 
 def register(subparsers) -> None:

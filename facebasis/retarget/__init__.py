@@ -21,6 +21,8 @@ headmotion the head's per-frame similarity apart from the expression (Procrustes
 featurescale eq. 12 per feature: each eye and the mouth moved in the target's own proportions
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
+rigoptions the rig fit's identity mode, landmark vertex indices and exclusive pairs, checked
+pointnoise each landmark's own noise from the pilot fits: a landmark the rig reproduces worse weighs less
 framefit   one frame's pose/weight fit with frozen settings (:class:`FrameSolver`, :class:`FrameFit`)
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
 observe    which shapes the landmarks can tell apart (:func:`identifiability`)
@@ -36,6 +38,7 @@ Captures are read with :func:`facebasis.capture.trackfile.read_capture` (the sta
 between the two halves of the method).
 files      landmark/index/image input files; media: MP4 (PyAV) and GIF output
 pipeline   the three command-line jobs as library calls (checked inputs, atomic output folders)
+rigrun     the ``retarget`` job (:func:`run_retarget`, re-exported by ``pipeline``)
 """
 
 from .animation import animated_glb_bytes, write_rig_animation

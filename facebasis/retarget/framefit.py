@@ -85,6 +85,8 @@ class FrameSolver:
         scale s_ref (px per rig unit): the data term in pixels over s_ref, i.e. each frame's term
         times ``(s / s_ref)^2`` (landmark noise of a fixed size in pixels; s_ref: the median scale of the
         pilot fits, :meth:`.rigdrive.RigRetargeter.pilot_stats`)
+    point_weights : None, or (L,) square-root weights of the landmarks' residuals in both steps (the
+        per-point noise model, :mod:`.pointnoise`; on top of the contour's sliding)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
         centre (2,) its principal point, px (see :meth:`flatten`)
     """
@@ -103,6 +105,7 @@ class FrameSolver:
     focal: float = float("inf")
     centre: np.ndarray | None = None
     pixel_scale: float | None = None
+    point_weights: np.ndarray | None = None
 
     @property
     def n_shapes(self) -> int:
@@ -238,7 +241,9 @@ class FrameSolver:
         else:
             x_prev, s, R, t = state
             n_alt, rounds = self.alternations, 1
-        W = contour_weights(p, self.contour, self.contour_slide)
+        W = contour_weights(p, self.contour, self.contour_slide, len(p))
+        if self.point_weights is not None:
+            W = (np.tile(np.eye(2), (len(p), 1, 1)) if W is None else W) * self.point_weights[:, None, None]
         W = None if W is None else W[vis]
         x, nodes = x_prev.copy(), 0
         for _ in range(n_alt):

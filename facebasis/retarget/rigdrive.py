@@ -68,12 +68,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError, named_params, parameter_error, parse_mode
+from ..errors import InputError, parameter_error, parse_mode
 from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
 from .observe import Identifiability, identifiability, landmark_jacobian
+from .pointnoise import POINT_NOISE_MODES, point_sigmas, point_weights
 from .reststart import rest_start
+from .rigoptions import DEFAULT_IDENTITY, IDENTITY_MODES, check_landmark_indices, resolve_identity, resolve_pairs
 from .pose import (
     PI,
     fit_pose_affine,
@@ -91,8 +93,6 @@ DEFAULT_RIDGE = "auto"
 PRIOR_STD = 0.5
 #: at most this many frames, evenly spaced, are fitted for the noise estimate of the "auto" rule
 PILOT_FRAMES = 40
-#: how the person's neutral landmarks are obtained (see the module docstring and :mod:`.calibrate`)
-IDENTITY_MODES = ("auto", "first-frame", "rig", "quantile")
 #: weight of a contour landmark's residual along the contour, relative to across it (see
 #: :func:`.pose.contour_weights`): the jaw line of a 68-point capture slides along the face's outline
 CONTOUR_SLIDE = 0.05
@@ -102,22 +102,11 @@ IBUG_CONTOUR = tuple(range(17))
 DEFAULT_SPARSITY = 3.0
 #: landmark noise models of :class:`RigRetargeter` (``noise_model``)
 NOISE_MODELS = ("pixels", "rig")
-#: default identity mode (measured in reports/reproduction/real_clips_notes.md and reports/retarget)
-DEFAULT_IDENTITY = "auto"
 
 
-def resolve_identity(identity=None, first_frame_neutral=None) -> str:
-    """The identity mode from ``identity`` and the older boolean ``first_frame_neutral`` (True is
-    ``"first-frame"``, False is ``"rig"``); both given and disagreeing: :class:`InputError`."""
-    if identity is not None and identity not in IDENTITY_MODES:
-        raise InputError(f"identity: expected one of {', '.join(IDENTITY_MODES)}, found {identity!r}")
-    if first_frame_neutral is None:
-        return DEFAULT_IDENTITY if identity is None else identity
-    old = "first-frame" if first_frame_neutral else "rig"
-    if identity is not None and identity != old:
-        raise InputError(what="identity", expected="one setting", found=f"identity={identity!r} and "
-                         f"first_frame_neutral={bool(first_frame_neutral)} (which means {old!r})")
-    return old
+def pilot_frame_indices(T: int, n: int = PILOT_FRAMES) -> np.ndarray:
+    """Up to ``n`` evenly spaced frame indices of a T-frame capture: the frames of the pilot fits."""
+    return np.unique(np.linspace(0, T - 1, min(T, n)).round().astype(int))
 
 
 def auto_ridge(noise_rig: float, prior_std: float = PRIOR_STD, floor: float = RIDGE_FLOOR) -> float:
@@ -158,6 +147,8 @@ class RetargetResult:
     neutral_landmarks : (L, 3) the neutral landmark positions the frames were solved with (the rig's,
         or the person's from the identity step); None when the result was built by hand
     pixel_scale : s_ref of the pixel noise model (:attr:`.framefit.FrameSolver.pixel_scale`; None: rig units)
+    point_weights : (L,) the landmarks' square-root weights of the per-point noise model
+        (:mod:`.pointnoise`; None: ``point_noise="shared"``)
     """
 
     names: tuple[str, ...]
@@ -175,6 +166,7 @@ class RetargetResult:
     calibration: IdentityCalibration | None = None
     neutral_landmarks: np.ndarray | None = None
     pixel_scale: float | None = None
+    point_weights: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -183,46 +175,6 @@ class RetargetResult:
     def rotation_vectors(self) -> np.ndarray:
         """(T, 3) rotation vectors (radians)."""
         return np.stack([rotation_to_vector(R) for R in self.rotation])
-
-
-def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
-    """(L,) int64 vertex indices; :class:`InputError` if the count is not the capture's L, an index
-    is out of range or one vertex is given twice (two landmarks pinned to one vertex)."""
-    idx = np.asarray(indices)
-    if idx.ndim != 1 or not (np.issubdtype(idx.dtype, np.integer) or (idx.size == 0)):
-        if idx.ndim == 1 and np.issubdtype(idx.dtype, np.floating) and np.all(idx == np.round(idx)):
-            idx = idx.astype(np.int64)
-        else:
-            raise InputError(f"{name}: expected a flat list of integer vertex indices, found shape {idx.shape} "
-                             f"of {idx.dtype}")
-    idx = idx.astype(np.int64)
-    if len(idx) != n_landmarks:
-        raise InputError(f"{name}: expected {n_landmarks} indices (one per capture landmark), found {len(idx)}")
-    bad = idx[(idx < 0) | (idx >= n_vertices)]
-    if len(bad):
-        raise InputError(f"{name}: expected vertex indices in [0, {n_vertices}), found {bad[:10].tolist()}")
-    from .files import repeated_indices
-
-    dup = repeated_indices(idx)
-    if dup:
-        raise InputError(f"{name}: expected distinct vertex indices (one vertex per landmark), found {dup}")
-    return idx
-
-
-def resolve_pairs(rig: Rig, pairs, what: str = "{exclusive}") -> np.ndarray:
-    """Exclusive pairs given as names (a, b) or indices -> (p, 2) int64 (unknown names: RigError;
-    ``what`` names them, a ``{name}`` placeholder for a library parameter, see :mod:`facebasis.errors`)."""
-    P = list(pairs or ())
-    if not P:
-        return np.zeros((0, 2), np.int64)
-    if all(isinstance(a, str) and isinstance(b, str) for a, b in P):
-        flat = [n for ab in P for n in ab]
-        return rig.index(flat, what=what, named=named_params(what)).reshape(-1, 2)
-    arr = np.asarray(P, np.int64).reshape(-1, 2)
-    if arr.min() < 0 or arr.max() >= rig.n_shapes:
-        raise InputError(what=what, expected=f"shape indices in [0, {rig.n_shapes})", found=arr.tolist(),
-                         params=named_params(what))
-    return arr
 
 
 class RigRetargeter:
@@ -268,6 +220,9 @@ class RigRetargeter:
         whose face is smaller in the image weighs its landmarks less (the data term times
         ``(s / s_ref)^2``, s_ref the median scale of the pilot fits that set the noise: :meth:`pilot_stats`);
         "rig": a fixed size on the face (the former model; the same while the face keeps its size)
+    point_noise : "per-point" (the default): every landmark has its own noise, estimated from the pilot
+        fits, and a landmark noisier than the typical one weighs less (:mod:`.pointnoise`); "shared":
+        one noise for every landmark (the former model)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
@@ -275,7 +230,8 @@ class RigRetargeter:
                  first_frame_neutral: bool | None = None, identity: str | None = None,
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
                  sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True,
-                 focal: float | None = None, centre=None, noise_model: str = "pixels"):
+                 focal: float | None = None, centre=None, noise_model: str = "pixels",
+                 point_noise: str = "per-point"):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -316,6 +272,7 @@ class RigRetargeter:
         self.sparsity = float(sparsity)
         focal, centre = check_camera(focal, centre)
         self.noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
+        self.point_noise = parse_mode("point_noise", point_noise, POINT_NOISE_MODES, "per-point")
         ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -370,8 +327,7 @@ class RigRetargeter:
         vertices. Noise-free captures of the rig give ~0.
         """
         pilot = (self.model if model is None else model).at_centre(landmarks, visible).pilot()
-        T = len(landmarks)
-        frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
+        frames = pilot_frame_indices(len(landmarks))
         fits = [pilot.solve_frame(landmarks[f], visible[f], None) for f in frames if visible[f].sum() >= 4]
         fits = [fit for fit in fits if np.isfinite(fit.rms) and fit.s > 0]
         if not fits:
@@ -404,6 +360,9 @@ class RigRetargeter:
                 model = replace(model, ridge=auto_ridge(noise))
             if self.noise_model == "pixels":
                 model = replace(model, pixel_scale=s_ref if np.isfinite(s_ref) and s_ref > 0 else None)
+        if self.point_noise == "per-point":             # each landmark's own noise (pointnoise.py)
+            sigma = point_sigmas(model, landmarks, visible, pilot_frame_indices(len(landmarks)))
+            model = replace(model, point_weights=point_weights(sigma, PRIOR_STD * np.sqrt(RIDGE_FLOOR)))
         return model, calibration, noise
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -431,7 +390,8 @@ class RigRetargeter:
             if progress is not None:
                 progress(f, T)
         return RetargetResult(self.rig.names, X, S, Rs, Ts, res, nodes, float(fps), time.perf_counter() - t0,
-                              model.ridge, noise, self.identity, calibration, model.v0, model.pixel_scale)
+                              model.ridge, noise, self.identity, calibration, model.v0, model.pixel_scale,
+                              model.point_weights)
 
 
 def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth: float = DEFAULT_SMOOTH,
@@ -447,4 +407,5 @@ def retarget_landmarks(rig: Rig, indices, landmarks, lost=None, pairs=(), smooth
 __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_landmarks", "fit_pose_affine", "fit_pose_gn",
            "rotation_from_vector", "rotation_to_vector", "check_landmark_indices", "resolve_pairs", "Identifiability",
            "identifiability", "landmark_jacobian", "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES",
-           "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI", "NOISE_MODELS"]
+           "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI", "NOISE_MODELS",
+           "POINT_NOISE_MODES", "pilot_frame_indices"]

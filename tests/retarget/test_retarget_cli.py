@@ -376,3 +376,47 @@ def test_the_principal_point_is_not_named_as_focal():
     from facebasis.cli.common import FLAGS
 
     assert "centre" not in FLAGS and FLAGS["focal"] == "--focal" and FLAGS["noise_model"] == "--noise-model"
+
+
+def test_point_noise_option(capture, tmp_path, capsys, monkeypatch):
+    """--point-noise per-point|shared reaches the solver (default: the library's, per-point), the
+    landmarks' weights are in the summary (none with shared); bad or repeated values are one line with
+    nothing written."""
+    from facebasis.retarget.rigdrive import RigRetargeter
+
+    folder, _ = capture
+    seen = []
+    original = RigRetargeter.__init__
+
+    def spy(self, *a, **kw):
+        seen.append(kw.get("point_noise"))
+        original(self, *a, **kw)
+
+    monkeypatch.setattr(RigRetargeter, "__init__", spy)
+    for extra, want in (([], "per-point"), (["--point-noise", "shared"], "shared"), (["--point-noise", "per-point"], "per-point")):
+        out = tmp_path / f"pn{len(seen)}"
+        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
+        assert code == 0, stdout
+        assert seen[-1] == want
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["point_noise"] == want
+        w = summary.get("landmark_weights")
+        assert (w is None) == (want == "shared")
+        if w is not None:
+            assert len(w) == summary_landmarks(folder) and min(w) > 0 and max(w) == 1.0
+            assert "landmark noise per point:" in stdout
+    for argv, msg in ((["--point-noise", "pointwise"], "invalid choice: 'pointwise'"),
+                      (["--point-noise", "shared", "--point-noise", "per-point"], "--point-noise")):
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(InputError, match=r"^point_noise: expected one of per-point, shared, found 'pointwise'$"):
+        from facebasis.retarget.pipeline import run_retarget
+
+        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", point_noise="pointwise")
+    assert not (tmp_path / "out").exists()
+
+
+def summary_landmarks(folder) -> int:
+    from facebasis.capture.trackfile import read_capture
+
+    return read_capture(folder).n_landmarks

@@ -8,7 +8,8 @@ from facebasis.cli.common import flags_of
 from facebasis.defaults.face import default_template
 from facebasis.defaults.face_landmarks import face_landmarks
 from facebasis.errors import InputError, RigError
-from facebasis.retarget.pipeline import _parse_ridge, load_retarget_rig, run_animate2d
+from facebasis.retarget.pipeline import load_retarget_rig, run_animate2d
+from facebasis.retarget.rigrun import _parse_ridge
 from facebasis.retarget.rigdrive import resolve_pairs
 from facebasis.retarget.synthetic import capture_from_landmarks, smooth_weight_curves, synthetic_capture
 

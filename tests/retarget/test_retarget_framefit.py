@@ -116,8 +116,9 @@ def test_run_returns_what_it_settled_on_and_leaves_the_retargeter_as_it_was(shif
         assert first.calibration is None
     # the frames were solved on that neutral with that ridge: frame 0 again by hand, same answer
     assert first.pixel_scale > 0                                  # the pixel noise model's s_ref, recorded
+    assert first.point_weights is not None and first.point_weights.shape == (len(idx),)   # per-point noise, recorded
     model = dataclasses.replace(rt.model.with_neutral(first.neutral_landmarks), ridge=first.ridge,
-                                pixel_scale=first.pixel_scale)
+                                pixel_scale=first.pixel_scale, point_weights=first.point_weights)
     fit = model.solve_frame(cap.landmarks[0])
     assert np.array_equal(fit.x, first.weights[0]) and fit.rms == first.residual[0]
     # a second run of the same retargeter gives the same result

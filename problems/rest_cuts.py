@@ -14,7 +14,8 @@ them, ``facebasis landmarks --detector dlib`` on the cut's first frame, then ``f
 when at least 150 frames long. The recipe (``python -m problems.reproduce rest-cuts``) cuts the detector
 captures (dlib and MediaPipe) every 8 s from 4 s (``--step 200 --first 100`` at 25 fps) plus the takes'
 starts (``--step 100000``), and the tracking-only captures every 8 s from 0, with the variants
-*rig_noise*, *shared_points* and *default*, merged into one table.
+*shared_points*, *rig_noise* and *default*, merged into one table (the per-cut table compares
+*default* with the first of them).
 
 Every cut's frame 0 is labelled at rest or not by landmarks alone (:func:`facebasis.retarget.reststart.rest_start`:
 the first 0.5 s held within the owner's 1.5% calm tolerance, lips closed against the capture's own
@@ -51,7 +52,7 @@ MIN_FRAMES = 150
 LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
-VARIANTS = {"before": ({"noise_model": "rig"}, False), "default": ({}, True),
+VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared"}, False), "default": ({}, True),
             "no_anchor": ({"rest_anchor": False}, True),
             "rig_noise": ({"noise_model": "rig"}, True),
             "shared_points": ({"point_noise": "shared"}, True)}

@@ -123,9 +123,18 @@ class FrameSolver:
         """The solver as the pilot fits use it: frames on their own (no temporal term), ridge
         :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as fixed points
         (plain least squares: what the neutral or the noise estimate must explain; ``plain=False``
-        keeps the contour's sliding, to compare fits as the frames will be solved)."""
-        return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0,
+        keeps the contour's sliding, to compare fits as the frames will be solved); every landmark
+        weighs alike (no ``point_weights``)."""
+        return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0, point_weights=None,
                        contour_slide=1.0 if plain else self.contour_slide)
+
+    def whitened_residual(self, p, fit: "FrameFit") -> np.ndarray:
+        """(L, 2) landmark residual of a fit of the landmarks p (L, 2), in rig units as the weight step
+        measures it, ``(flat - t) / s - Pi R q`` (q the rig points at the fit's weights), whitened by the
+        contour weights of p (:func:`.pose.contour_weights`; not by ``point_weights``)."""
+        r = (fit.flat - fit.t) / fit.s - self.landmarks3d(fit.x) @ (PI @ fit.R).T
+        W = contour_weights(p, self.contour, self.contour_slide, len(p))
+        return r if W is None else np.einsum("lij,lj->li", W, r)
 
     def at_centre(self, landmarks, visible) -> "FrameSolver":
         """The solver with its principal point resolved: ``centre`` as given (the ``retarget`` command

@@ -56,7 +56,7 @@ def negative_demand(solver: FrameSolver, landmarks, visible, frames) -> np.ndarr
         M = PI @ fit.R
         q = solver.landmarks3d(fit.x)[v]
         E = whiten(np.einsum("ij,ljk->lik", M, solver.D[v]).reshape(-1, k), W)
-        r = whiten((((fit.flat[v] - fit.t) / fit.s) - q @ M.T).reshape(-1), W)
+        r = solver.whitened_residual(P[f], fit)[v].reshape(-1)
         Qp, _ = np.linalg.qr(whiten(pose_jacobian(q @ fit.R.T), W))
         E = E - Qp @ (Qp.T @ E)
         r = r - Qp @ (Qp.T @ r)

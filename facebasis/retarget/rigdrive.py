@@ -20,7 +20,8 @@ previous frame, pose and weights are alternated:
 
   W the per-landmark weights of the noise model (identity, except on a contour: the jaw line of a
   68-point capture, whose residual along the contour counts ``contour_slide`` = 0.05, see
-  :func:`.pose.contour_weights`; the pose step uses the same W), and the linear term the
+  :func:`.pose.contour_weights`; times each landmark's own noise weight, :mod:`.pointnoise`; the
+  pose step uses the same W), and the linear term the
   exponential (sparse) part of the weight prior (default ``sparsity`` 3: with the Gaussian part it
   is a Gaussian of standard deviation 0.5 centred at -1.5, truncated to [0, 1]: a weight stays at 0
   unless the landmarks push it; measured in reports/retarget/plausibility.md);
@@ -70,10 +71,10 @@ import numpy as np
 
 from ..errors import InputError, parameter_error, parse_mode
 from ..geometry.rig import Rig
-from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset
+from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset, pilot_frames
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
 from .observe import Identifiability, identifiability, landmark_jacobian
-from .pointnoise import POINT_NOISE_MODES, point_sigmas, point_weights
+from .pointnoise import POINT_NOISE_MODES, noise_floor, point_sigmas, point_weights
 from .reststart import rest_start
 from .rigoptions import DEFAULT_IDENTITY, IDENTITY_MODES, check_landmark_indices, resolve_identity, resolve_pairs
 from .pose import (
@@ -102,11 +103,6 @@ IBUG_CONTOUR = tuple(range(17))
 DEFAULT_SPARSITY = 3.0
 #: landmark noise models of :class:`RigRetargeter` (``noise_model``)
 NOISE_MODELS = ("pixels", "rig")
-
-
-def pilot_frame_indices(T: int, n: int = PILOT_FRAMES) -> np.ndarray:
-    """Up to ``n`` evenly spaced frame indices of a T-frame capture: the frames of the pilot fits."""
-    return np.unique(np.linspace(0, T - 1, min(T, n)).round().astype(int))
 
 
 def auto_ridge(noise_rig: float, prior_std: float = PRIOR_STD, floor: float = RIDGE_FLOOR) -> float:
@@ -327,7 +323,8 @@ class RigRetargeter:
         vertices. Noise-free captures of the rig give ~0.
         """
         pilot = (self.model if model is None else model).at_centre(landmarks, visible).pilot()
-        frames = pilot_frame_indices(len(landmarks))
+        T = len(landmarks)
+        frames = np.unique(np.linspace(0, T - 1, min(T, PILOT_FRAMES)).round().astype(int))
         fits = [pilot.solve_frame(landmarks[f], visible[f], None) for f in frames if visible[f].sum() >= 4]
         fits = [fit for fit in fits if np.isfinite(fit.rms) and fit.s > 0]
         if not fits:
@@ -336,8 +333,8 @@ class RigRetargeter:
 
     def settle(self, landmarks, visible, fps: float = 30.0, finite=None) -> tuple[FrameSolver, IdentityCalibration | None, float]:
         """What a capture's frames are solved with: (the frame solver on the person's neutral, with the
-        ridge of the "auto" rule, the pixel noise's s_ref and the principal point, the identity calibration
-        or None, the noise estimate (nan when the ridge was given)). ``landmarks`` (T, L, 2) without NaN,
+        ridge of the "auto" rule, the pixel noise's s_ref, the principal point and the landmarks' own noise
+        weights (``point_noise="per-point"``, :mod:`.pointnoise`), the identity calibration or None, the noise estimate (nan when the ridge was given)). ``landmarks`` (T, L, 2) without NaN,
         ``visible`` (T, L) bool, ``fps`` (the start window of :func:`.reststart.rest_start`), ``finite``
         (T, L) bool: the points that had coordinates before NaN was replaced (default all; the others are
         left out of the start evidence: it keeps a lost point's estimate but cannot use a made-up one)."""
@@ -361,8 +358,8 @@ class RigRetargeter:
             if self.noise_model == "pixels":
                 model = replace(model, pixel_scale=s_ref if np.isfinite(s_ref) and s_ref > 0 else None)
         if self.point_noise == "per-point":             # each landmark's own noise (pointnoise.py)
-            sigma = point_sigmas(model, landmarks, visible, pilot_frame_indices(len(landmarks)))
-            model = replace(model, point_weights=point_weights(sigma, PRIOR_STD * np.sqrt(RIDGE_FLOOR)))
+            sigma = point_sigmas(model, landmarks, visible, pilot_frames(visible, PILOT_FRAMES))
+            model = replace(model, point_weights=point_weights(sigma, noise_floor(model.v0)))
         return model, calibration, noise
 
     def run(self, landmarks, lost=None, fps: float = 30.0, progress=None) -> RetargetResult:
@@ -408,4 +405,4 @@ __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_lan
            "rotation_from_vector", "rotation_to_vector", "check_landmark_indices", "resolve_pairs", "Identifiability",
            "identifiability", "landmark_jacobian", "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES",
            "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI", "NOISE_MODELS",
-           "POINT_NOISE_MODES", "pilot_frame_indices"]
+           "POINT_NOISE_MODES"]

@@ -28,7 +28,6 @@ def resolve_identity(identity=None, first_frame_neutral=None) -> str:
     return old
 
 
-
 def check_landmark_indices(indices, n_vertices: int, n_landmarks: int, name: str = "landmark indices") -> np.ndarray:
     """(L,) int64 vertex indices; :class:`InputError` if the count is not the capture's L, an index
     is out of range or one vertex is given twice (two landmarks pinned to one vertex)."""

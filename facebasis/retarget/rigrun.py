@@ -135,7 +135,9 @@ def _finite(v):
 
 
 def _point_summary(weights, log) -> dict:
-    """summary.json entries (and a log line) of the per-point noise model's landmark weights (L,) or None."""
+    """summary.json's ``landmark_weights`` (and a log line) from the per-point noise model's square-root
+    weights (L,) or None: each landmark's weight of its squared residual, ``(r / max(sigma_l, r))^2``, 1
+    for the typical landmark (:mod:`.pointnoise`)."""
     if weights is None:
         return {}
     w = np.asarray(weights, np.float64) ** 2                     # weights of the squared residuals
@@ -203,7 +205,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
              "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame",
              "focal_px": focal, "principal_point_px": None if centre is None else [float(c) for c in centre],
              "noise_model": solver_obj.noise_model, "noise_pixel_scale": result.pixel_scale,
-             "point_noise": point_noise, **_point_summary(result.point_weights, log)}
+             "point_noise": point_noise}
     cal = result.calibration
     if cal is not None:
         moved = float(np.sqrt(np.mean(np.sum(cal.offset ** 2, axis=1))))
@@ -231,6 +233,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                                 "not the rig's, or its landmarks are defined differently); {identity} auto (the "
                                 "default) estimates the person's neutral from the capture, {identity} first-frame "
                                 "takes frame 0 as it"))
+    extra.update(_point_summary(result.point_weights, log))
     with atomic_directory(out_dir) as stage:
         if preview:
             extra.update(_write_previews(stage, capture_dir, cap, r.neutral, r.faces, r.names, result.weights,

@@ -12,4 +12,7 @@ def test_before_variants_run_the_former_noise_model():
     assert rig_plausibility.VARIANTS["before"]["noise_model"] == "rig"
     assert rest_cuts.VARIANTS["before"][0]["noise_model"] == "rig"
     assert rest_cuts.VARIANTS["rig_noise"][0] == {"noise_model": "rig"}
+    assert rig_plausibility.VARIANTS["before"]["point_noise"] == "shared"      # the former landmark model too
+    assert rest_cuts.VARIANTS["before"][0]["point_noise"] == "shared"
+    assert rest_cuts.VARIANTS["shared_points"][0] == {"point_noise": "shared"}
     assert inspect.signature(RigRetargeter).parameters["noise_model"].default == "pixels"   # what "default" runs

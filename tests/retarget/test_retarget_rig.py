@@ -229,16 +229,17 @@ def test_auto_ridge_keeps_a_calm_face_of_another_shape_calm(face):
     other = rig.with_neutral(default_person().neutral, rig.deltas, "other face")
     calm = np.zeros((120, rig.n_shapes))
     cap = synthetic_capture(other, idx, calm, noise_px=1.0, seed=4, amplitude_deg=10.0)
-    # the ridge rule alone, one noise for every landmark (the per-point model gives up on fitting the
-    # points where the face differs most, so the plain pixel residual is not what it minimises: 7.1-7.3 px)
-    fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR, identity="rig",
-                               point_noise="shared")
-    auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, identity="rig", point_noise="shared")
-    # measured with the rig's neutral: floor 0.14 mean weight, 1.8% of weights > 0.95; auto 0.005, none
-    assert (fixed.weights > 0.95).mean() > 0.01
-    assert (auto.weights > 0.95).mean() == 0.0
-    assert auto.weights.mean() < 0.6 * fixed.weights.mean()
-    assert auto.residual.mean() < fixed.residual.mean() + 0.5        # the fit barely changes (px)
+    for points in ("shared", "per-point"):
+        fixed = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, ridge=RIDGE_FLOOR, identity="rig",
+                                   point_noise=points)
+        auto = retarget_landmarks(rig, idx, cap.landmarks, pairs=EXCLUSIVE_PAIRS, identity="rig", point_noise=points)
+        # measured with the rig's neutral: floor 0.14 mean weight, 1.8% of weights > 0.95; auto 0.005, none
+        assert (fixed.weights > 0.95).mean() > 0.01
+        assert (auto.weights > 0.95).mean() == 0.0
+        assert auto.weights.mean() < 0.6 * fixed.weights.mean()
+        if points == "shared":       # per point, the points where the face differs most weigh less, so the
+            # plain pixel residual is not what the fit minimises (7.1-7.3 px against 6.6 with the floor ridge)
+            assert auto.residual.mean() < fixed.residual.mean() + 0.5        # the fit barely changes (px)
     P = rig.index([n for ab in EXCLUSIVE_PAIRS for n in ab]).reshape(-1, 2)
     assert np.abs(auto.weights[:, P[:, 0]] * auto.weights[:, P[:, 1]]).max() == 0.0
     # the defaults (identity "auto": the rest face is this calm face) keep every frame near rest:

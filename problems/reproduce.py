@@ -233,6 +233,32 @@ RECIPES: tuple[Recipe, ...] = (
                  f"--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/defaults_round5_seed{s}" for s in (0, 1)),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round6", "The rig bench with issue #27's sixth-round identity fit (the detail field in "
+           "300 functions of the kernel basis, eq. D3 of geometry/detailprior.py; the joint fit on every skin vertex "
+           "with eq. D2's prior for its pair count), both persons, seeds 0, 1 and 3 (seed 3 unseen while tuning); "
+           "baseline: registration-rig-defaults-round5",
+           tuple(f"registration/round6_seed{s}/{f}" for s in (0, 1, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail in-space --train 12 "
+                 f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
+                 f"--out reports/registration/round6_seed{s}" for s in (0, 1, 3)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round6-attribution", "Where the sixth round's remaining held-out excess comes from "
+           "(the ratio with the neutral, the motion or one of ICT's vertex ranges made exact), persons with detail "
+           "outside the identity space, seeds 3 and 1",
+           ("registration/round6_attribution/rig.csv", "registration/round6_attribution/rig.md",
+            "registration/round6_attribution/rig_scans.csv"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 3 1 --persons detail --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 48 --attribution "
+            "--out reports/registration/round6_attribution",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round5-seed3", "The fifth round's identity fit (150 Laplace-Beltrami eigenfunctions, the "
+           "joint fit on the modes-only fit's 5000 vertices) on seed 3, both persons: the baseline of "
+           "registration-rig-round6's unseen seed",
+           tuple(f"registration/round5_seed3/{f}" for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 3 --persons detail in-space --train 12 "
+            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 "
+            "--after-model normal --regions 48 --out reports/registration/round5_seed3",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
            "sockets, holes) set by the modes plus the seen detail's extension in 3D (the default; eq. U1 of "
            "geometry/unseen.py), seeds 0 and 1, persons with detail outside the identity space and in it; baseline: "

@@ -42,9 +42,19 @@ over the ``J`` largest ``lambda_k``: 300 functions hold 96.5% of the pointwise v
 leave 0.004-0.006 cm of the benchmark's fields, for 1.5 s CPU (one dense eigendecomposition of ~1700
 inducing points on ICT). 3D distance, not geodesic: the covariance the unseen vertices' extension uses
 (:mod:`.unseen`, eq. U1); where two surfaces nearly touch (the lips, the lids) they share detail. Registered
-neutral of the ICT rig benchmark's ``detail`` persons, RMS over all vertices (spectral 150 -> kernel 300):
-seed 0 0.0456 -> 0.0319 cm, seed 1 0.0376 -> 0.0323, seed 3 0.0529 -> 0.0423; in-space persons 0.0143 ->
-0.0148, 0.0164 -> 0.0168.
+neutral of the ICT rig benchmark's ``detail`` persons, RMS over all vertices (spectral 150 -> kernel 300,
+the joint fit otherwise as before): seed 0 0.0456 -> 0.0319 cm, seed 1 0.0376 -> 0.0323, seed 3 0.0529 ->
+0.0423; in-space persons 0.0143 -> 0.0148, 0.0164 -> 0.0168.
+
+**The joint fit's data.** The modes-only fit pairs a seeded sample of 5000 vertices (~2800 kept pairs on an
+ICT scan), enough for 100 modes but thin for 400 unknowns; the joint fit pairs every vertex of the part
+(``fit_samples``; ~8000 pairs) and, its data term being a mean over them, takes eq. D2 with its own pair count
+(the modes-only fit's kept share of its candidates). Same persons, kernel 300: every vertex 0.0319 -> 0.0273
+(seed 0), 0.0323 -> 0.0254 (seed 1), 0.0423 -> 0.0349 (seed 3), in-space 0.0148 -> 0.0107, 0.0168 -> 0.0130;
+with eq. D2 for the pair count (the default) 0.0266, 0.0212, 0.0342, in-space 0.0114, 0.0133 (a ten times weaker
+prior: 0.0260, 0.0217, in-space 0.0150; 8000 candidates instead of all: 0.0284, 0.0290). Twenty rounds settle
+it (40: the same within 0.0002 cm). Held as :class:`ModesAndField`, the joint fit costs 2.5 s CPU (4.7 s with the
+dense (400, n, 3) basis); the whole neutral 7.5-8 s CPU at load ~15 (scratch scripts on the benchmark's scans).
 
 **The coefficients' prior at the noise level** (eq. D2). The fit's energy weighs the prior by a fixed
 ``mu`` (:class:`.shapemodel.ModelFitOptions`, 1e-4: strong enough to find the basin from the

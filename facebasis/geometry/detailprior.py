@@ -52,7 +52,9 @@ ICT scan), enough for 100 modes but thin for 400 unknowns; the joint fit pairs e
 (the modes-only fit's kept share of its candidates). Same persons, kernel 300: every vertex 0.0319 -> 0.0273
 (seed 0), 0.0323 -> 0.0254 (seed 1), 0.0423 -> 0.0349 (seed 3), in-space 0.0148 -> 0.0107, 0.0168 -> 0.0130;
 with eq. D2 for the pair count (the default) 0.0266, 0.0212, 0.0342, in-space 0.0114, 0.0133 (a ten times weaker
-prior: 0.0260, 0.0217, in-space 0.0150; 8000 candidates instead of all: 0.0284, 0.0290). Twenty rounds settle
+prior: 0.0260, 0.0217, in-space 0.0150; 8000 candidates instead of all: 0.0284, 0.0290). In-space seed 3 is worse,
+0.0143 -> 0.0175 (the kernel basis alone too): at ``s`` from the modes-only fit's offsets, which for a person in the
+space are that fit's shrinkage more than detail, the richer field takes some of the modes' part. Twenty rounds settle
 it (40: the same within 0.0002 cm). Held as :class:`ModesAndField`, the joint fit costs 2.5 s CPU (4.7 s with the
 dense (400, n, 3) basis); the whole neutral 7.5-8 s CPU at load ~15 (scratch scripts on the benchmark's scans).
 

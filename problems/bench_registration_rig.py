@@ -24,7 +24,8 @@ Methods, all from ICT's generic neutral as template:
   ``regions R``: the expression fit with one weight per expression in each of R soft regions
   (:mod:`facebasis.geometry.expressionregions`).
   The identity fit carries the detail prior of :mod:`facebasis.geometry.detailprior` (a smooth normal field
-  beside the modes, ``--detail-modes`` eigenfunctions, default 150); ``, no detail prior``: the modes-only fit.
+  beside the modes, ``--detail-modes`` basis functions, default 300, of ``--detail-basis`` kernel (eq. D3 there) or
+  spectral (eq. D1, method ``, spectral basis``)); ``, no detail prior``: the modes-only fit.
   That joint fit continues from the modes-only one with the coefficients' prior at the noise level of its
   residual (eq. D2 there; ``--noise-prior off``, method ``, fixed prior``: the fixed prior, the previous fit).
 
@@ -56,7 +57,8 @@ from problems.bench_registration import _ears, _ict_setup, make_scan
 
 SINGLES = ("jawOpen", "mouthSmile_L", "mouthPucker")
 PARTS = ("jaw", "brows", "nose", "eyes", "lips_out", "lips_in")  #: ICT's 68 landmarks' groups, in order
-DETAIL_MODES = 150  #: RegistrationOptions' default detail prior (geometry/detailprior.py); 0: the modes-only fit
+DETAIL_MODES = 300  #: RegistrationOptions' default detail prior (geometry/detailprior.py); 0: the modes-only fit
+DETAIL_BASIS = "kernel"  #: its default basis (eq. D3 there; "spectral": eq. D1, the earlier tables' with 150 modes)
 
 
 def detail_field(V: np.ndarray, normals: np.ndarray, face: np.ndarray, rng, amplitude: float = 0.25,
@@ -137,7 +139,8 @@ def heldout_scanned(rig, pp, pairs, vertices: np.ndarray) -> float:
 
 def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after_model: str = "nricp",
                regions: int = 0, attribution: bool = False,
-               detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True) -> tuple[dict, list]:
+               detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True,
+               detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None) -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -158,13 +161,17 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
             f" regions {regions}" if regions else "") + (
             "" if detail_modes == DETAIL_MODES else f", detail prior {detail_modes}" if detail_modes else ", no detail prior") + (
             "" if noise_prior or not detail_modes else ", fixed prior") + (
-            "" if unseen or not detail_modes else ", unseen as fitted")
+            "" if unseen or not detail_modes else ", unseen as fitted") + (
+            "" if detail_basis == DETAIL_BASIS or not detail_modes else f", {detail_basis} basis") + (
+            "" if detail_fit is None or not detail_modes else f", joint fit {detail_fit[0]} samples {detail_fit[1]} rounds")
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
     opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions),
                                detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior,
-                                                                 unseen=unseen))
+                                                         unseen=unseen, basis=detail_basis,
+                                                         **({} if detail_fit is None else dict(
+                                                             fit_samples=detail_fit[0], fit_iterations=detail_fit[1]))))
     reg = Registration(T, F, opts, name="ICT neutral", identity=ident, expressions=expr)
     singles = [truth_rig.evaluate(np.eye(len(names))[[names.index(s)]])[0] for s in SINGLES]
     shapes = [("neutral", B0), *zip(p.example_names, p.examples), *zip(SINGLES, singles)]
@@ -297,8 +304,14 @@ def main(argv=None):
                     help="also the held-out ratio with parts of the registered set made exact (the neutral, the "
                          "motion, ICT's vertex ranges): where the rig's excess error comes from")
     ap.add_argument("--detail-modes", type=int, nargs="+", default=[DETAIL_MODES],
-                    help="eigenfunctions of the identity fit's detail prior (0: off, the modes-only fit); one method "
+                    help="basis functions of the identity fit's detail prior (0: off, the modes-only fit); one method "
                          "per value")
+    ap.add_argument("--detail-basis", nargs="+", choices=("kernel", "spectral"), default=[DETAIL_BASIS],
+                    help="DetailPriorOptions.basis (kernel: eq. D3 of geometry/detailprior.py, the default; spectral: "
+                         "Laplace-Beltrami eigenfunctions, eq. D1, the earlier default with 150); one method per value")
+    ap.add_argument("--detail-fit", type=int, nargs=2, default=None, metavar=("SAMPLES", "ROUNDS"),
+                    help="DetailPriorOptions.fit_samples and fit_iterations (the joint fit's vertices that pair with "
+                         "the scan, its rounds); default the library's; 5000 40: the earlier tables'")
     ap.add_argument("--noise-prior", nargs="+", choices=("on", "off"), default=["on"],
                     help="DetailPriorOptions.noise_prior (the joint identity fit continued with the prior at the noise "
                          "level, eq. D2 of geometry/detailprior.py; off: the fixed prior); one method per value")
@@ -318,14 +331,16 @@ def main(argv=None):
     for seed in args.seeds:
         for kind in args.persons:
             pp = person(seed, args.train, kind == "detail")
-            methods = [(None, "nricp", 0, DETAIL_MODES, True, True)] * (not args.no_baseline) + [
-                (k, a, r, m, n == "on", u == "on") for k in args.fit_modes for a in args.after_model
+            methods = [(None, "nricp", 0, DETAIL_MODES, True, True, DETAIL_BASIS)] * (not args.no_baseline) + [
+                (k, a, r, m, n == "on", u == "on", b) for k in args.fit_modes for a in args.after_model
                 for r in args.regions for m in args.detail_modes
                 for n in dict.fromkeys(args.noise_prior if m else ["on"])
-                for u in dict.fromkeys(args.unseen if m else ["on"])]
-            for k, a, r, m, n, u in methods:
+                for u in dict.fromkeys(args.unseen if m else ["on"])
+                for b in dict.fromkeys(args.detail_basis if m else [DETAIL_BASIS])]
+            for k, a, r, m, n, u, b in methods:
                 row, rows = run_method(pp, k, seed, kind, after_model=a, regions=r, attribution=args.attribution,
-                                       detail_modes=m, noise_prior=n, unseen=u)
+                                       detail_modes=m, noise_prior=n, unseen=u, detail_basis=b,
+                                       detail_fit=args.detail_fit)
                 summary.append(row)
                 scans += rows
                 _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept

@@ -26,7 +26,10 @@ def cmd_register(args) -> int:
                          "continues the fit of the modes and the detail field), found --detail-prior off")
     if args.detail_modes is not None and args.detail_prior == "off":
         raise InputError(f"--detail-modes {args.detail_modes}: expected together with --detail-prior on (the detail "
-                         "field's eigenfunctions), found --detail-prior off")
+                         "field's basis functions), found --detail-prior off")
+    if args.detail_basis is not None and args.detail_prior == "off":
+        raise InputError(f"--detail-basis {args.detail_basis}: expected together with --detail-prior on (the detail "
+                         "field's basis), found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 
@@ -40,7 +43,8 @@ def cmd_register(args) -> int:
                                    count=RegionOptions.count if args.expression_regions is None else args.expression_regions),
                                detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes
                                                          if args.detail_modes is None else args.detail_modes,
-                                                         noise_prior=args.identity_prior != "fixed"))
+                                                         noise_prior=args.identity_prior != "fixed",
+                                                         basis=args.detail_basis or DetailPriorOptions.basis))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -83,10 +87,13 @@ def register(subparsers) -> None:
                         "what the identity space cannot express is left to that field instead of sliding the "
                         "fitted points along the skin; 'off': the modes alone")
     p.add_argument("--detail-modes", default=None, type=int, action=Once, metavar="N",
-                   help="eigenfunctions of the template's Laplace-Beltrami operator carrying the detail field (default "
-                        "150; more take more of a person's detail outside the identity space: 300 on ICT persons with "
-                        "such detail, registered neutral 0.046 -> 0.039 cm RMS, for 7 s CPU more once per template, "
-                        "but one jawOpen scan of the benchmark then failed, 2.8 cm p95: not the default)")
+                   help="basis functions carrying the detail field (default 300; more take more of a person's detail "
+                        "outside the identity space, at more cost per neutral scan)")
+    p.add_argument("--detail-basis", default=None, action=Once, choices=("kernel", "spectral"),
+                   help="the detail field's basis: 'kernel' (default), the leading functions of a squared-exponential "
+                        "covariance in 3D at inducing points about 1.1 cm apart on ICT (Nystrom; 300 hold 96%% of its "
+                        "variance, 1.5 s CPU once per template); 'spectral', the template's first Laplace-Beltrami "
+                        "eigenfunctions (the previous default, with --detail-modes 150; 150 hold 82%%, 300 cost 10 s)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

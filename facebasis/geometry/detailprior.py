@@ -27,6 +27,37 @@ offsets a modes-only fit leaves (:mod:`.normalstage` on it). A scan within the s
 of the order of its noise, so the prior is weak and the fit is the modes-only one (ICT in-space
 person: 0.0163 -> 0.0165 cm median); with detail, 0.054 -> 0.040 cm (seed 0).
 
+**The field's basis** (eq. D3). The spectral form (D1) keeps the first ``J`` eigenfunctions only; 150 of them
+hold 82% of the prior's variance on ICT's head (``sigma_150 / sigma_1`` = 0.43: the spectrum is cut where it
+is still large), and what the basis cannot carry goes to the modes again. Projected onto the first 150 / 300
+eigenfunctions, the ICT rig benchmark's detail fields leave 0.014-0.019 / 0.006-0.010 cm RMS on the seen
+vertices (seeds 0-2); 300 eigenpairs cost 10 s CPU (ARPACK shift-invert). The default basis is instead the
+Nystrom form of the same squared-exponential covariance in 3D (Williams & Seeger 2001): inducing points ``z``
+one per cell of ``INDUCING_CELL l`` (vertex clustering of the template), ``K_zz = U Lambda U^T`` and
+
+    f = sum_k e_k b_k,   b_k(x) = k(x, z) u_k / sqrt(lambda_k),   e_k ~ N(0, s^2),   k(x, y) = exp(-|x - y|^2 / (2 l^2))
+                                                                                                   (eq. D3)
+
+over the ``J`` largest ``lambda_k``: 300 functions hold 96.5% of the pointwise variance (median vertex) and
+leave 0.004-0.006 cm of the benchmark's fields, for 1.5 s CPU (one dense eigendecomposition of ~1700
+inducing points on ICT). 3D distance, not geodesic: the covariance the unseen vertices' extension uses
+(:mod:`.unseen`, eq. U1); where two surfaces nearly touch (the lips, the lids) they share detail. Registered
+neutral of the ICT rig benchmark's ``detail`` persons, RMS over all vertices (spectral 150 -> kernel 300,
+the joint fit otherwise as before): seed 0 0.0456 -> 0.0319 cm, seed 1 0.0376 -> 0.0323, seed 3 0.0529 ->
+0.0423; in-space persons 0.0143 -> 0.0148, 0.0164 -> 0.0168.
+
+**The joint fit's data.** The modes-only fit pairs a seeded sample of 5000 vertices (~2800 kept pairs on an
+ICT scan), enough for 100 modes but thin for 400 unknowns; the joint fit pairs every vertex of the part
+(``fit_samples``; ~8000 pairs) and, its data term being a mean over them, takes eq. D2 with its own pair count
+(the modes-only fit's kept share of its candidates). Same persons, kernel 300: every vertex 0.0319 -> 0.0273
+(seed 0), 0.0323 -> 0.0254 (seed 1), 0.0423 -> 0.0349 (seed 3), in-space 0.0148 -> 0.0107, 0.0168 -> 0.0130;
+with eq. D2 for the pair count (the default) 0.0266, 0.0212, 0.0342, in-space 0.0114, 0.0133 (a ten times weaker
+prior: 0.0260, 0.0217, in-space 0.0150; 8000 candidates instead of all: 0.0284, 0.0290). In-space seed 3 is worse,
+0.0143 -> 0.0175 (the kernel basis alone too): at ``s`` from the modes-only fit's offsets, which for a person in the
+space are that fit's shrinkage more than detail, the richer field takes some of the modes' part. Twenty rounds settle
+it (40: the same within 0.0002 cm). Held as :class:`ModesAndField`, the joint fit costs 2.5 s CPU (4.7 s with the
+dense (400, n, 3) basis); the whole neutral 7.5-8 s CPU at load ~15 (scratch scripts on the benchmark's scans).
+
 **The coefficients' prior at the noise level** (eq. D2). The fit's energy weighs the prior by a fixed
 ``mu`` (:class:`.shapemodel.ModelFitOptions`, 1e-4: strong enough to find the basin from the
 template). As a Gaussian MAP, a point-to-plane residual of independent noise ``sigma_n`` over ``p``
@@ -54,6 +85,7 @@ Blanz V., Vetter T. A morphable model for the synthesis of 3D faces. SIGGRAPH 19
 Vallet B., Levy B. Spectral geometry processing with manifold harmonics. Eurographics 2008.
 Solin A., Sarkka S. Hilbert space methods for reduced-rank Gaussian process regression.
 Statistics and Computing 30, 2020.
+Williams C. K. I., Seeger M. Using the Nystrom method to speed up kernel machines. NIPS 2001.
 """
 
 from __future__ import annotations
@@ -67,15 +99,19 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
-from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
+from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 
 
 #: the noise-level prior (eq. D2) is never weaker than this fraction of the fixed one (a noise-free scan
 #: leaves no residual: the modes the surface cannot see would be unconstrained)
 NOISE_PRIOR_FLOOR = 1e-3
+#: the kernel basis' inducing points: one per cell of this many lengths ``l`` (eq. D3)
+INDUCING_CELL = 0.6
+#: the field's bases (:class:`DetailPriorOptions`.basis)
+BASES = ("kernel", "spectral")
 
 
-def noise_prior(fit: ModelFit, h: float, ceiling: float) -> float:
+def noise_prior(fit: ModelFit, h: float, ceiling: float, pairs: float | None = None) -> float:
     """``mu`` of :mod:`.shapemodel`'s energy at which the coefficients' prior weighs as their Gaussian
     ``N(0, sigma^2)`` against the residuals ``fit`` leaves, taken as independent Gaussian noise of
     their RMS (eq. D2): ``mu h^2 = rms^2 / pairs``, within ``[NOISE_PRIOR_FLOOR ceiling, ceiling]``.
@@ -85,8 +121,11 @@ def noise_prior(fit: ModelFit, h: float, ceiling: float) -> float:
     fit : a fit of the modes (its ``rms`` point-to-plane residual over ``pairs`` kept pairs)
     h : the fit's length unit (median edge length)
     ceiling : the fixed ``mu`` the fit ran with (the noise-level prior is never stronger)
+    pairs : the pairs of the fit the prior is for (default ``fit.pairs``): the energy's data term is a mean
+        over them, so the same noise weighs ``1 / pairs`` per pair
     """
-    mu = fit.rms ** 2 / (max(fit.pairs, 1) * h ** 2)
+    p = fit.pairs if pairs is None else pairs
+    mu = fit.rms ** 2 / (max(p, 1) * h ** 2)
     return float(np.clip(mu, NOISE_PRIOR_FLOOR * ceiling, ceiling))
 
 
@@ -96,8 +135,9 @@ class DetailPriorOptions:
 
     Attributes
     ----------
-    modes : how many Laplace-Beltrami eigenfunctions carry the field (0: no detail prior, the
-        modes-only fit)
+    modes : how many basis functions carry the field (0: no detail prior, the modes-only fit)
+    basis : ``"kernel"``: the Nystrom basis of the squared-exponential covariance in 3D (eq. D3, the
+        default); ``"spectral"``: the first Laplace-Beltrami eigenfunctions (eq. D1, the previous pipeline)
     length : the field's correlation length ``l``, as a fraction of the fitted part's bounding-box
         diagonal (0.04: 1.9 cm on ICT's head, the scale of a cheek or a brow)
     amplitude : ``s`` is this times the RMS of the normal offsets that a modes-only fit leaves
@@ -112,14 +152,23 @@ class DetailPriorOptions:
         after the fits is the normal one alone (``after_model="normal"``, the default): after the free
         non-rigid ICP the offsets are not along the normals
     unseen_samples : at most this many seen vertices condition that extension (a seeded sample)
+    fit_samples : at most this many of the part's vertices (a seeded sample) pair with the scan in the joint fit
+        (the modes-only fit keeps ``ModelFitOptions.samples``, 5000): the field's functions need more data
+        than the modes (default: every vertex of ICT's 14062; with 5000, ~2800 kept pairs for 400 unknowns)
+    fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
+        it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
+        the modes-only fit, ``ModelFitOptions.iterations``
     """
 
-    modes: int = 150
+    modes: int = 300
     length: float = 0.04
     amplitude: float = 2.0
     noise_prior: bool = True
     unseen: bool = True
     unseen_samples: int = 2000
+    basis: str = "kernel"
+    fit_samples: int = 100_000
+    fit_iterations: int = 20
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
@@ -131,13 +180,17 @@ class DetailPriorOptions:
         for k in ("noise_prior", "unseen"):
             if not isinstance(getattr(self, k), (bool, np.bool_)):
                 raise InputError(f"detail.{k}: expected True or False, found {getattr(self, k)!r}")
-        u = self.unseen_samples
-        if isinstance(u, bool) or not (isinstance(u, (int, np.integer)) and u >= 1):
-            raise InputError(f"detail.unseen_samples: expected an integer >= 1, found {u!r}")
+        for k in ("unseen_samples", "fit_samples", "fit_iterations"):
+            u = getattr(self, k)
+            if isinstance(u, bool) or not (isinstance(u, (int, np.integer)) and u >= 1):
+                raise InputError(f"detail.{k}: expected an integer >= 1, found {u!r}")
+        if self.basis not in BASES:
+            raise parameter_error("detail_basis", f"one of {', '.join(BASES)}", repr(self.basis), label="detail.basis")
 
 
 class DetailPrior:
-    """The Laplace-Beltrami eigenbasis of a template's part, built once per template (eq. D1).
+    """The detail field's basis on a template's part, built once per template: the Nystrom basis of eq. D3
+    (``options.basis == "kernel"``) or the Laplace-Beltrami eigenbasis of eq. D1 (``"spectral"``).
 
     Parameters
     ----------
@@ -146,8 +199,11 @@ class DetailPrior:
 
     Attributes
     ----------
-    eigenvalues : (J,) ``lambda_j`` (1 / length^2), ascending
-    fields : (J, n, 3) ``phi_j m``: each eigenfunction along the template's unit normals
+    eigenvalues : (J,) spectral: ``lambda_j`` (1 / length^2), ascending; kernel: the inducing points' kernel
+        matrix's ``lambda_k``, descending
+    phi : (J, n) the basis functions (``phi_j`` spectral, ``b_k`` kernel), normals : (n, 3) the template's unit
+        normals; ``fields`` (J, n, 3) ``phi m``: each function along them (formed on demand)
+    scales : (J,) each function's prior standard deviation for ``s = 1`` (:meth:`sigma`)
     length : ``l`` in the template's units
     """
 
@@ -155,25 +211,78 @@ class DetailPrior:
         from .nricp import NonRigidICP
 
         self.options = options
-        n = len(V)
         self.length = options.length * float(np.linalg.norm(V.max(0) - V.min(0)))
-        K = cotangent_laplacian(V, F, clip_negative=True)
-        mass = lumped_mass(V, F)
-        mass = np.maximum(mass, 1e-9 * mass.max())
-        k = int(min(options.modes, n - 2))
-        # shift-invert about a small negative shift: the k smallest eigenpairs; a fixed start vector
-        # (ARPACK's default is random) keeps the result deterministic
-        lam, phi = spla.eigsh(sp.csc_matrix(K), k, M=sp.diags(mass).tocsc(), sigma=-1e-2 / self.length ** 2,
-                              which="LM", v0=np.ones(n))
-        order = np.argsort(lam)
-        self.eigenvalues = np.maximum(lam[order], 0.0)
-        m = NonRigidICP(F, n).vertex_normals(V)
-        self.fields = phi[:, order].T[:, :, None] * m[None]
+        build = _kernel_basis if options.basis == "kernel" else _spectral_basis
+        phi, self.eigenvalues, self.scales = build(V, F, self.length, int(options.modes))
+        self.phi, self.normals = phi, NonRigidICP(F, len(V)).vertex_normals(V)
+
+    @property
+    def fields(self) -> np.ndarray:
+        """(J, n, 3) each basis function along the template's unit normals."""
+        return self.phi[:, :, None] * self.normals[None]
 
     def sigma(self, s: float) -> np.ndarray:
-        """(J,) prior standard deviations ``sigma_j`` of eq. D1 for a pointwise deviation ``s``."""
-        ell = self.length
-        return s * np.sqrt(2.0 * np.pi) * ell * np.exp(-ell ** 2 * self.eigenvalues / 4.0)
+        """(J,) prior standard deviations ``sigma_j`` of eq. D1 / D3 for a pointwise deviation ``s``."""
+        return s * self.scales
+
+
+def _spectral_basis(V: np.ndarray, F: np.ndarray, ell: float, modes: int):
+    """The first ``modes`` eigenfunctions ``(J, n)`` of ``K phi = lambda M phi``, their ``lambda`` and the
+    scales ``sqrt(2 pi) l exp(-l^2 lambda / 4)`` of eq. D1."""
+    n = len(V)
+    K = cotangent_laplacian(V, F, clip_negative=True)
+    mass = lumped_mass(V, F)
+    mass = np.maximum(mass, 1e-9 * mass.max())
+    k = int(min(modes, n - 2))
+    # shift-invert about a small negative shift: the k smallest eigenpairs; a fixed start vector
+    # (ARPACK's default is random) keeps the result deterministic
+    lam, phi = spla.eigsh(sp.csc_matrix(K), k, M=sp.diags(mass).tocsc(), sigma=-1e-2 / ell ** 2, which="LM",
+                          v0=np.ones(n))
+    order = np.argsort(lam)
+    lam = np.maximum(lam[order], 0.0)
+    return phi[:, order].T, lam, np.sqrt(2.0 * np.pi) * ell * np.exp(-ell ** 2 * lam / 4.0)
+
+
+def _kernel_basis(V: np.ndarray, F: np.ndarray, ell: float, modes: int, chunk: int = 2048):
+    """The Nystrom basis ``(J, n)`` of eq. D3 (its ``J <= modes`` functions of the largest ``lambda_k``, the
+    ones above 1e-10 of the largest), those ``lambda_k`` and unit scales. Inducing points: the first vertex
+    of each occupied cell of ``INDUCING_CELL l`` (deterministic); ``k(x, z)`` in blocks of ``chunk`` vertices."""
+    from scipy.linalg import eigh
+    from scipy.spatial.distance import cdist
+
+    key = np.floor((V - V.min(0)) / (INDUCING_CELL * ell)).astype(np.int64)
+    Z = V[np.sort(np.unique(key, axis=0, return_index=True)[1])]
+    m = len(Z)
+    J = int(min(modes, m))
+    lam, U = eigh(np.exp(-cdist(Z, Z, "sqeuclidean") / (2.0 * ell ** 2)), subset_by_index=[m - J, m - 1])
+    lam, U = lam[::-1], U[:, ::-1]
+    keep = lam > 1e-10 * lam[0]
+    W = U[:, keep] / np.sqrt(lam[keep])
+    B = np.concatenate([np.exp(-cdist(V[i:i + chunk], Z, "sqeuclidean") / (2.0 * ell ** 2)) @ W
+                        for i in range(0, len(V), chunk)])  # a loop over blocks of vertices (memory), not vertices
+    return B.T, lam[keep], np.ones(int(keep.sum()))
+
+
+class ModesAndField:
+    """The identity modes ``D (K, n, 3)`` and the field's functions ``phi (J, n)`` along the normals ``m (n, 3)`` as
+    one structured basis of ``K + J`` columns (:class:`.shapemodel.DenseBasis`'s members), never the dense
+    ``(K + J, n, 3)`` array: the point-to-plane Jacobian of the field is ``phi_j(i) (m_i . RN_i)``, one product per
+    pair and function instead of three, and no (K + J, p, 3) gather per round (with 300 functions and all of ICT's
+    vertices as candidates, 100 MB)."""
+
+    def __init__(self, deltas: np.ndarray, phi: np.ndarray, normals: np.ndarray):
+        self.modes, self.phi, self.normals = DenseBasis(np.asarray(deltas)), phi, normals
+        self.shape = (len(deltas) + len(phi),) + np.shape(deltas)[1:]
+
+    def combine(self, c: np.ndarray) -> np.ndarray:
+        """``sum_k c_k D_k + (sum_j c_{K+j} phi_j) m`` (n, 3)."""
+        K = self.modes.shape[0]
+        return self.modes.combine(c[:K]) + (c[K:] @ self.phi)[:, None] * self.normals
+
+    def normal_jacobian(self, idx: np.ndarray, RN: np.ndarray) -> np.ndarray:
+        """``(p, K + J)``: the modes' ``D_k,idx_i . RN_i`` and the field's ``phi_j(idx_i) (m_idx_i . RN_i)``."""
+        mn = (self.normals[idx] * RN).sum(1)
+        return np.concatenate([self.modes.normal_jacobian(idx, RN), self.phi[:, idx].T * mn[:, None]], 1)
 
 
 def offset_rms(offset: np.ndarray, no_surface: np.ndarray) -> float:
@@ -209,8 +318,8 @@ def fit_with_detail(plain: ModelFit, prior: DetailPrior, base: np.ndarray, delta
     sigma = np.concatenate([np.ones(K), prior.sigma(s)])
     c0 = pose0 = None
     if start is not None:  # continued from a fit of the modes (its coefficients, the field at zero)
-        c0, pose0 = np.concatenate([start.coefficients, np.zeros(len(prior.fields))]), start.pose
-    fit = fit_shape_model(base, np.concatenate([deltas, prior.fields]), surface, normals_of, h, options, sigma=sigma,
+        c0, pose0 = np.concatenate([start.coefficients, np.zeros(len(prior.phi))]), start.pose
+    fit = fit_shape_model(base, ModesAndField(deltas, prior.phi, prior.normals), surface, normals_of, h, options, sigma=sigma,
                           c0=c0, pose0=pose0)
     return ModelFit(fit.vertices, fit.coefficients[:K], fit.pose, fit.rms, fit.pairs,
                     plain.iterations + fit.iterations, float(s))
@@ -221,19 +330,23 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     (``reg.options.detail``): the normal offsets the modes-only fit ``plain`` leaves (:mod:`.normalstage`)
     set ``s``, then :func:`fit_with_detail` on the template's skin (a template of several parts: the
     other parts follow the joint fit's pose and coefficients). ``plain`` unchanged with ``modes == 0``.
-    The eigenbasis is built at the first call and kept on ``reg``.
+    The field's basis is built at the first call and kept on ``reg``.
     """
     from .normalstage import normal_displacement
 
     opts = reg.options.detail
     if opts.modes == 0:
         return plain
-    fo = reg.options.identity_fit
-    if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves
-        fo = dataclasses.replace(fo, prior=noise_prior(plain, h, fo.prior), prior_start=None)
+    fo = dataclasses.replace(reg.options.identity_fit, samples=opts.fit_samples)
+    part = slice(None) if reg.skin is None else reg.skin
+    if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves; continued.
+        # The joint fit pairs about as large a share of its candidate vertices as the modes-only fit did
+        n = len(P[part])
+        pairs = plain.pairs * min(opts.fit_samples, n) / min(reg.options.identity_fit.samples, n)
+        fo = dataclasses.replace(fo, prior=noise_prior(plain, h, fo.prior, pairs), prior_start=None,
+                                 iterations=opts.fit_iterations)
     out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
                               reg.options.normal_stage, use=reg.skin)
-    part = slice(None) if reg.skin is None else reg.skin
     icp = reg.nricp if reg.skin is None else reg._skin_icp
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
@@ -248,5 +361,5 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     return ModelFit(X, fit.coefficients, fit.pose, fit.rms, fit.pairs, fit.iterations, fit.detail_sd)
 
 
-__all__ = ["DetailPrior", "DetailPriorOptions", "NOISE_PRIOR_FLOOR", "fit_with_detail", "identity_fit_with_detail",
+__all__ = ["BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "fit_with_detail", "identity_fit_with_detail",
            "noise_prior", "offset_rms"]

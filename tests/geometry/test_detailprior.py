@@ -22,7 +22,7 @@ from facebasis.geometry.shapemodel import ShapeBasis
 
 def test_the_eigenbasis_is_smooth_along_the_normals_orthonormal_and_deterministic():
     V, F = grid_sheet(21, 17, size=2.0)
-    prior = DetailPrior(V, F, DetailPriorOptions(modes=12))
+    prior = DetailPrior(V, F, DetailPriorOptions(modes=12, basis="spectral"))
     lam, fields = prior.eigenvalues, prior.fields
     assert fields.shape == (12, len(V), 3) and np.all(np.diff(lam) >= -1e-12) and abs(lam[0]) < 1e-8
     assert np.allclose(fields[:, :, :2], 0.0)  # along the sheet's normals (z) only
@@ -31,10 +31,46 @@ def test_the_eigenbasis_is_smooth_along_the_normals_orthonormal_and_deterministi
     assert np.allclose(np.abs(phi[0]), np.abs(phi[0]).mean())  # the first is constant
     # the 2nd/3rd are the sheet's longest wave (pi / 2)^2 along x (2 wide; the sheet is 1.6 high)
     assert lam[1] == pytest.approx((np.pi / 2.0) ** 2, rel=0.05)
-    again = DetailPrior(V, F, DetailPriorOptions(modes=12))
+    again = DetailPrior(V, F, DetailPriorOptions(modes=12, basis="spectral"))
     assert np.array_equal(again.fields, fields)
     s = prior.sigma(0.1)
     assert s.shape == (12,) and np.all(np.diff(s) <= 0) and s[0] == pytest.approx(0.1 * np.sqrt(2 * np.pi) * prior.length)
+
+
+def test_the_kernel_basis_carries_the_squared_exponential_covariance_along_the_normals():
+    """Eq. D3: the Nystrom basis' covariance sum_k b_k(x) b_k(y) is the kernel k(x, y) (unit variance)."""
+    from scipy.spatial.distance import cdist
+
+    V, F = grid_sheet(31, 25, size=3.0)
+    opts = DetailPriorOptions(modes=200, length=0.1)
+    prior = DetailPrior(V, F, opts)
+    J, fields = len(prior.fields), prior.fields
+    assert fields.shape == (J, len(V), 3) and 50 < J <= 200 and np.allclose(fields[:, :, :2], 0.0)
+    b = fields[:, :, 2]
+    ell = prior.length
+    assert ell == pytest.approx(0.1 * np.linalg.norm(V.max(0) - V.min(0)))
+    k = np.exp(-cdist(V, V, "sqeuclidean") / (2 * ell ** 2))
+    assert np.abs(b.T @ b - k).max() < 0.05  # measured 0.016: the covariance, not only the variance
+    assert np.all(np.diff(prior.eigenvalues) <= 0) and np.array_equal(prior.sigma(0.2), np.full(J, 0.2))
+    assert np.array_equal(DetailPrior(V, F, opts).fields, fields)  # deterministic
+    # fewer functions than asked for when the inducing points are fewer; the leading ones first
+    few = DetailPrior(V, F, DetailPriorOptions(modes=10, length=0.1))
+    assert len(few.fields) == 10 and np.allclose(np.abs(few.fields), np.abs(fields[:10]), atol=1e-8)
+
+
+def test_modes_and_field_is_the_dense_basis_without_forming_it():
+    from facebasis.geometry.detailprior import ModesAndField
+    from facebasis.geometry.shapemodel import DenseBasis
+
+    V, F = grid_sheet(9, 7, size=2.0)
+    rng = np.random.default_rng(3)
+    D = rng.standard_normal((4, len(V), 3))
+    prior = DetailPrior(V, F, DetailPriorOptions(modes=20, length=0.2))
+    both, dense = ModesAndField(D, prior.phi, prior.normals), DenseBasis(np.concatenate([D, prior.fields]))
+    c = rng.standard_normal(both.shape[0])
+    idx, RN = rng.choice(len(V), 30), rng.standard_normal((30, 3))
+    assert both.shape == dense.shape and np.allclose(both.combine(c), dense.combine(c), atol=1e-12)
+    assert np.allclose(both.normal_jacobian(idx, RN), dense.normal_jacobian(idx, RN), atol=1e-12)
 
 
 def person_parts(k=12):
@@ -84,6 +120,20 @@ def test_detail_outside_the_space_no_longer_slides_the_fitted_correspondence():
     assert noise[1] < 0.9 * fixed[1] and noise[2] < 0.85 * fixed[2]
 
 
+def test_the_kernel_basis_takes_the_detail_the_spectral_basis_leaves_to_the_modes():
+    """The default (eq. D3, 300 functions) against the previous default (150 eigenfunctions, eq. D1): the
+    truncated spectrum leaves part of the field to the modes, which slide the points."""
+    T, F, basis, c, S, G, truth = _person_with_detail()
+    out = {}
+    for name, opts in (("spectral", DetailPriorOptions(modes=150, basis="spectral")), ("kernel", DetailPriorOptions())):
+        res = Registration(T, F, RegistrationOptions(after_model="normal", detail=opts), identity=basis).register(S, G)
+        err = np.linalg.norm(res.vertices - truth, axis=1)
+        out[name] = np.median(err), np.percentile(err, 95), np.abs(res.model.coefficients - c).max()
+    # measured: median 0.0112 -> 0.0047 cm, p95 0.072 -> 0.013, coefficients 0.34 -> 0.08
+    assert out["kernel"][0] < 0.6 * out["spectral"][0] and out["kernel"][1] < 0.4 * out["spectral"][1]
+    assert out["kernel"][2] < 0.5 * out["spectral"][2]
+
+
 def test_the_noise_level_prior_recovers_what_the_fixed_prior_shrinks():
     from test_shapemodel import as_scan, face, modes
 
@@ -113,6 +163,8 @@ def test_noise_prior_is_the_gaussian_weight_within_its_bounds():
     assert noise_prior(fit(0.02, 4000), 0.3, 1e-4) == pytest.approx(0.02 ** 2 / (4000 * 0.3 ** 2))
     assert noise_prior(fit(1.0, 10), 0.3, 1e-4) == 1e-4  # never stronger than the fixed prior
     assert noise_prior(fit(0.0, 4000), 0.3, 1e-4) == pytest.approx(NOISE_PRIOR_FLOOR * 1e-4)  # a noise-free scan
+    # for a fit over more pairs (the joint fit's), the same noise weighs less per pair
+    assert noise_prior(fit(0.02, 4000), 0.3, 1e-4, pairs=8000) == pytest.approx(0.02 ** 2 / (8000 * 0.3 ** 2))
 
 
 def test_several_parts_follow_the_fit_with_the_detail_prior():
@@ -137,6 +189,10 @@ def test_several_parts_follow_the_fit_with_the_detail_prior():
     ({"amplitude": float("nan")}, r"detail\.amplitude: expected a positive number, found nan"),
     ({"noise_prior": "yes"}, r"detail\.noise_prior: expected True or False, found 'yes'"),
     ({"noise_prior": 1}, r"detail\.noise_prior: expected True or False, found 1"),
+    ({"basis": "eigen"}, r"detail\.basis: expected one of kernel, spectral, found 'eigen'"),
+    ({"basis": None}, r"detail\.basis: expected one of kernel, spectral, found None"),
+    ({"fit_samples": 0}, r"detail\.fit_samples: expected an integer >= 1, found 0"),
+    ({"fit_iterations": 2.0}, r"detail\.fit_iterations: expected an integer >= 1, found 2.0"),
 ])
 def test_bad_detail_prior_options_are_refused(kw, match):
     with pytest.raises(InputError, match=match):
@@ -152,8 +208,8 @@ def test_cli_detail_prior_bad_value_and_repeat(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("given, modes, noise", [([], 150, True), (["--identity-prior", "noise"], 150, True),
-                                                 (["--identity-prior", "fixed"], 150, False),
+@pytest.mark.parametrize("given, modes, noise", [([], 300, True), (["--identity-prior", "noise"], 300, True),
+                                                 (["--identity-prior", "fixed"], 300, False),
                                                  (["--detail-prior", "off", "--identity-prior", "fixed"], 0, False)])
 def test_cli_identity_prior_reaches_the_registration(tmp_path, monkeypatch, given, modes, noise):
     import facebasis.geometry.registerfiles as rf
@@ -214,7 +270,7 @@ def test_cli_detail_modes_bad_values_repeat_and_without_the_prior(tmp_path, caps
     assert not out.exists()
 
 
-@pytest.mark.parametrize("given, modes", [([], 150), (["--detail-modes", "300"], 300), (["--detail-modes", "0"], 0)])
+@pytest.mark.parametrize("given, modes", [([], 300), (["--detail-modes", "150"], 150), (["--detail-modes", "0"], 0)])
 def test_cli_detail_modes_reach_the_registration(tmp_path, monkeypatch, given, modes):
     import facebasis.geometry.registerfiles as rf
 
@@ -223,4 +279,25 @@ def test_cli_detail_modes_reach_the_registration(tmp_path, monkeypatch, given, m
     assert main(["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out",
                  str(tmp_path / "o"), *given]) == 0
     assert seen["opts"].detail == DetailPriorOptions(modes=modes)
-    assert DetailPriorOptions().modes == 150 and DetailPriorOptions().unseen is True  # the CLI's default is the library's
+    assert DetailPriorOptions().modes == 300 and DetailPriorOptions().unseen is True  # the CLI's default is the library's
+
+
+def test_cli_detail_basis_bad_value_repeat_without_the_prior_and_reaching_the_registration(tmp_path, capsys,
+                                                                                          monkeypatch):
+    import facebasis.geometry.registerfiles as rf
+
+    out = tmp_path / "o"
+    base = ["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out)]
+    parser_refuses(main, base + ["--detail-basis", "eigen"], capsys, "--detail-basis", "invalid choice: 'eigen'")
+    parser_refuses(main, base + ["--detail-basis", "kernel", "--detail-basis", "spectral"], capsys, "--detail-basis")
+    assert main(base + ["--detail-basis", "spectral", "--detail-prior", "off", "--identity-prior", "fixed"]) == 2
+    err = capsys.readouterr().err
+    assert "--detail-basis spectral: expected together with --detail-prior on" in err and err.count("\n") == 1
+    assert not out.exists()
+    seen = {}
+    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
+    for given, basis in (([], "kernel"), (["--detail-basis", "spectral", "--detail-modes", "150"], "spectral")):
+        seen.clear()
+        assert main(base + given) == 0
+        assert seen["opts"].detail == DetailPriorOptions(modes=300 if not given else 150, basis=basis)
+    assert DetailPriorOptions().basis == "kernel"  # the CLI's default is the library's

@@ -347,6 +347,12 @@ RECIPES: tuple[Recipe, ...] = (
                        "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",
                        "cp {tmp}/expression/bench_cartoon.md reports/reproduction/cartoon_expression.md"),
            data=("video", "detect", "mediapipe"), script="problems/bench_cartoon.py"),
+    Recipe("capture-features", "The dlib and tracking-only captures' expression measures against dlib and "
+           "MediaPipe on the source video, per quarter of each take: what the painting check can reach",
+           ("reproduction/capture_features.csv", "reproduction/capture_features.md"),
+           CAPTURES + TRACKED + (f"{PY} problems.capture_features cap12={{tmp}}/cap12_edit_det,{{tmp}}/cap12_edit_track "
+                                 "cap13={tmp}/cap13_edit2_det,{tmp}/cap13_edit2_track --out reports/reproduction",),
+           data=("video", "detect", "mediapipe"), script="problems/capture_features.py"),
     Recipe("cartoon-readback", "Known expression ramps warped onto every target image and read back by dlib and "
            "MediaPipe, with each detector's still noise on the image: which measures a detector can see on a drawn, "
            "photographed or painted face",

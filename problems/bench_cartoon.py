@@ -1,8 +1,8 @@
 """Benchmark of the cartoon warp on real captures: folds, head motion, speed, expressions kept.
 
     python -m problems.bench_cartoon CAPTURE_DIR [CAPTURE_DIR ...] [--out reports/reproduction]
-        [--check-every 5] [--no-check] [--png FRAME ...] [--images a,b] [--modes paper,still,follow]
-        [--warp-every K]
+        [--check-every 5] [--no-check] [--readers dlib,mediapipe] [--mp-every 1] [--noise-draws 12]
+        [--png FRAME ...] [--images a,b] [--modes paper,still,follow] [--warp-every K]
 
 For every capture folder (``facebasis capture`` output) and every target image (the built-in
 cartoon, the same with its lips closed, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
@@ -20,14 +20,23 @@ against the rest cartoon) among the capture mesh's triangles (those of ``cartoon
 among all triangles of the warp (band included), the largest count in a frame, frames where the
 iteration ran / where the blend fallback was needed, the cartoon's face width (distance of jaw
 landmarks 0 and 16) over the clip, ms per frame (planning + warp, single thread), and the
-expression check: dlib run on the output frames and on the source frames (every ``--check-every``
-frame), the Pearson correlation over time of mouth opening, mouth width, brow height and eye
-opening (each divided by the eye-corner distance of the same detection): ``r_<feature>`` (dlib on the
-output against dlib on the source: the check), beside ``r_cap_<feature>`` (the capture's own
-landmarks against dlib on the source: what any warp of this capture can reach), ``r_warp_<feature>``
-(the warped cartoon's landmarks against the capture's landmarks: does the warp carry the motion,
-before any detector) and ``r_read_<feature>`` (dlib on the output against the warped landmarks: does
-the detector read back what the warp drew), each with its median over the four measures.
+expression check. Each detector of ``--readers`` (:mod:`problems.cartoon_check`: dlib on every
+``--check-every``-th frame, MediaPipe in static-image mode on every ``--mp-every``-th, both on every
+frame of the capture's blinks as well) is run on the output frames and on the source frames, and the
+Pearson correlation over time of mouth opening, mouth width, brow height and eye opening (each
+divided by the eye-corner distance of the same detection) is given as ``r_<feature>`` (dlib on the
+output against dlib on the source: the check; ``r_mp_<feature>`` the same with MediaPipe), beside
+``r_cap_[mp_]<feature>`` (the capture's own landmarks against the detector on the source: what any
+warp of this capture can reach), ``r_warp_<feature>`` (the warped cartoon's landmarks against the
+capture's landmarks on every frame: does the warp carry the motion, before any detector),
+``r_read_[mp_]<feature>`` (the detector on the output against the warped landmarks: does it read back
+what the warp drew) and ``r_src_<feature>`` (dlib against MediaPipe on the source frames both read:
+how far two detectors agree on the real face), each with its median over the four measures. Per
+detector and feature, why the read-back falls short: ``gain_`` (slope of its reading against the
+warped measure over the clip), ``noise_`` (its still noise: standard deviation of the measure over
+``--noise-draws`` sub-pixel shifts of the unwarped image), ``floor_`` (the read-back that noise alone
+allows at that gain, :func:`problems.cartoon_check.noise_ceiling`) and ``r_all_`` (the reading's
+correlation with its fit on all four warped measures: above ``r_read_``, other motion is read into it).
 
 Frames of the real clips are written only to git-ignored files (``--png``:
 ``OUT/cartoon_frames_*.png``, source | paper | still side by side).
@@ -146,7 +155,14 @@ def folds_per_frame(rest, meshes, faces):
     return np.count_nonzero((a * np.sign(a0) <= 0) & ok, axis=-1)
 
 
-def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_frames, warp_every=1):
+def run_one(cap, name, img, lm_img, mode, readers, src_feats, png_frames, warp_every=1, noise=None):
+    """One row of the table for (capture, image, mode) and the frames asked for by ``png_frames``.
+
+    ``readers``: {detector name: (detector, (k,) frames it reads)} (:mod:`problems.cartoon_check`), empty for
+    no check; ``src_feats``: {detector name: (T, F) its measures on the source video, NaN where not read};
+    ``noise``: {detector name: (F,) its still noise on this image} (:func:`problems.cartoon_check.still_noise`)."""
+    from problems.cartoon_check import READERS, gain, multiple_correlation, noise_ceiling
+
     anim = CartoonAnimator(img, lm_img, cap.landmarks[0], cap.vertices[0], cap.faces,
                            head="follow" if mode == "follow" else "still", fold_free=mode != "paper",
                            amplitude="uniform" if mode in ("paper", "uniform") else "feature")
@@ -166,10 +182,11 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
     width = np.linalg.norm(meshes[:, 16] - meshes[:, 0], axis=1)
     warp, n_warp = 0.0, 0
     frames = {}
-    out_feats, warp_feats, cap_feats = [], [], []
+    read = {r: np.full((T, len(FEATURES)), np.nan) for r in readers}
+    wanted = {r: set(np.asarray(f).tolist()) for r, (_, f) in readers.items()}
     for t in range(T):
-        checked = detector is not None and t % check_every == 0
-        if t % warp_every and t not in png_frames and not checked:
+        who = [r for r in readers if t in wanted[r]]
+        if t % warp_every and t not in png_frames and not who:
             continue
         n_warp += 1
         t1 = time.perf_counter()
@@ -177,11 +194,10 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
         warp += time.perf_counter() - t1
         if t in png_frames:
             frames[t] = fr
-        if checked:
-            d = detector.detect(fr)
-            out_feats.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
-            warp_feats.append(features(meshes[t, :68]))
-            cap_feats.append(features(cap.landmarks[t]))
+        for r in who:
+            d = readers[r][0].detect(fr)
+            if d is not None:
+                read[r][t] = features(d)
     row = {"image": name, "mode": mode, "frames": T,
            "frames_fold_mesh": int(np.count_nonzero(folds_mesh)), "max_fold_mesh": int(folds_mesh.max()),
            "frames_fold_all": int(np.count_nonzero(folds_all)), "max_fold_all": int(folds_all.max()),
@@ -189,35 +205,65 @@ def run_one(cap, name, img, lm_img, mode, detector, check_every, src_feats, png_
            "frames_fallback": int(np.count_nonzero(drive.alpha < 1)) if drive else 0,
            "width_min": float(width.min()), "width_max": float(width.max()),
            "ms_plan": 1e3 * plan / T, "ms_warp": 1e3 * warp / max(n_warp, 1)}
-    if detector is not None and src_feats is not None:
-        of, wf, cf = np.array(out_feats), np.array(warp_feats), np.array(cap_feats)
-        row["detected"] = int(np.count_nonzero(np.isfinite(of[:, 0])))
-        for prefix, (a, b) in (("r_", (of, src_feats)), ("r_cap_", (cf, src_feats)), ("r_warp_", (wf, cf)),
-                               ("r_read_", (of, wf))):
-            for k, fname in enumerate(FEATURES):
-                row[f"{prefix}{fname}"] = correlation(a[:, k], b[:, k])
-            vals = np.array([row[f"{prefix}{f}"] for f in FEATURES])
-            row[f"{prefix}median"] = float(np.median(vals[np.isfinite(vals)])) if np.isfinite(vals).any() else float("nan")
+    if not readers or src_feats is None:
+        return row, frames
+    wf = np.array([features(m[:68]) for m in meshes])
+    cf = np.array([features(x) for x in cap.landmarks])
+    _correlations(row, "r_warp_", wf, cf)
+    if len(src_feats) > 1:                            # the two detectors on the source: how far they agree
+        _correlations(row, "r_src_", *[src_feats[r] for r, _ in READERS])
+    for r, p in READERS:
+        if r not in readers:
+            continue
+        of, sf = read[r], src_feats[r]
+        row[f"checked{'_' + p[:-1] if p else ''}"] = len(wanted[r])
+        row[f"detected{'_' + p[:-1] if p else ''}"] = int(np.count_nonzero(np.isfinite(of[:, 0])))
+        for prefix, (a, b) in ((f"r_{p}", (of, sf)), (f"r_cap_{p}", (cf, sf)), (f"r_read_{p}", (of, wf))):
+            _correlations(row, prefix, a, b)
+        sd_noise = noise[r] if noise else np.full(len(FEATURES), np.nan)
+        ok = np.isfinite(of[:, 0])
+        for k, f in enumerate(FEATURES):
+            g = gain(of[:, k], wf[:, k])
+            row[f"gain_{p}{f}"] = g
+            row[f"noise_{p}{f}"] = float(sd_noise[k])
+            row[f"floor_{p}{f}"] = noise_ceiling(g, float(np.std(wf[ok, k])) if ok.any() else np.nan, sd_noise[k])
+            row[f"r_all_{p}{f}"] = multiple_correlation(of[:, k], wf)
     return row, frames
 
 
-def source_features(cap, detector, check_every):
+def _correlations(row, prefix, a, b):
+    """row[prefix + feature] = correlation of the columns of a and b (T, F), and their median."""
+    for k, fname in enumerate(FEATURES):
+        row[f"{prefix}{fname}"] = correlation(a[:, k], b[:, k])
+    vals = np.array([row[f"{prefix}{f}"] for f in FEATURES])
+    row[f"{prefix}median"] = float(np.median(vals[np.isfinite(vals)])) if np.isfinite(vals).any() else float("nan")
+
+
+def source_features(cap, readers):
+    """{detector: (T, F) measures of the source video's frames it reads (NaN elsewhere)}."""
     from facebasis.retarget.media import read_video_frames
 
-    out = []
+    out = {r: np.full((cap.n_frames, len(FEATURES)), np.nan) for r in readers}
+    wanted = {r: set(np.asarray(f).tolist()) for r, (_, f) in readers.items()}
     for t, fr in enumerate(read_video_frames(cap.video)):
         if t >= cap.n_frames:
             break
-        if t % check_every == 0:
-            d = detector.detect(fr)
-            out.append(features(d) if d is not None else np.full(len(FEATURES), np.nan))
-    return np.array(out)
+        for r in readers:
+            if t in wanted[r]:
+                d = readers[r][0].detect(fr)
+                if d is not None:
+                    out[r][t] = features(d)
+    return out
 
 
 COLUMNS = ("clip", "image", "mode", "frames", "frames_fold_mesh", "max_fold_mesh", "frames_fold_all", "frames_iterated",
-           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "detected", "r_median")
+           "frames_fallback", "width_min", "width_max", "ms_plan", "ms_warp", "checked", "detected", "r_median",
+           "checked_mp", "detected_mp", "r_mp_median")
 #: the expression table's stages, in the order of the pipeline: capture, warp, detector read-back, the check
 STAGES = (("cap", "r_cap_"), ("warp", "r_warp_"), ("read", "r_read_"), ("check", "r_"))
+#: the noise table's columns: the detector's gain on the clip, its still noise, the read-back that noise
+#: allows, the read-back measured
+NOISE = (("gain", "gain_"), ("noise", "noise_"), ("floor", "floor_"), ("read", "r_read_"), ("all", "r_all_"))
 
 
 def _cell(v) -> str:
@@ -230,22 +276,35 @@ def _cell(v) -> str:
     return f"{f:.0f}" if f == int(f) else f"{f:.3g}"
 
 
+def _feature_table(rows, title, stages, reader, detected, feats) -> list[str]:
+    """Markdown lines of one per-feature table: ``stage / stage / ...`` per feature, ``reader`` the
+    detector's column prefix inserted after each stage's own ("" for dlib, "mp_")."""
+    head = ["clip", "image", "mode", "detected"] + [f"{n} ({' / '.join(s for s, _ in stages)})" for n in feats]
+    lines = ["", title, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["clip"], r["image"], r["mode"], _cell(r.get(detected, ""))]
+        cells += [" / ".join(_cell(r.get(f"{p}{n}" if p == "r_warp_" else f"{p}{reader}{n}", "")) for _, p in stages)
+                  for n in feats]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def markdown(csv_path) -> str:
     """The CSV written by :func:`main` as markdown: the folds/speed table, and (with the expression
-    check) a table of the four correlations per feature, ``cap / warp / read / check``."""
+    check) per detector a table of the four correlations per feature, ``cap / warp / read / check``,
+    and a table of the detector's gain, still noise, the read-back that noise allows and the one measured."""
     with open(csv_path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     cols = [c for c in COLUMNS if rows and c in rows[0]]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_cell(r.get(c, "")) for c in cols) + " |" for r in rows]
-    if rows and "r_cap_median" in rows[0]:
-        names = FEATURES + ("median",)
-        head = ["clip", "image", "mode", "detected"] + [f"{n} ({' / '.join(s for s, _ in STAGES)})" for n in names]
-        lines += ["", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for r in rows:
-            cells = [r["clip"], r["image"], r["mode"], _cell(r["detected"])]
-            cells += [" / ".join(_cell(r[f"{p}{n}"]) for _, p in STAGES) for n in names]
-            lines.append("| " + " | ".join(cells) + " |")
+    for reader, label, det in (("", "dlib", "detected"), ("mp_", "MediaPipe", "detected_mp")):
+        if not rows or f"r_cap_{reader}median" not in rows[0]:
+            continue
+        lines += _feature_table(rows, f"Expression check, {label} reading (cap / warp / read / check):", STAGES,
+                                reader, det, FEATURES + ("median",))
+        lines += _feature_table(rows, f"{label}: gain on the clip / still noise (sd) / read-back that noise "
+                                      "allows / read-back measured / read-back on all four warped measures:", NOISE, reader, det, FEATURES)
     return "\n".join(lines) + "\n"
 
 
@@ -254,7 +313,10 @@ def main(argv=None):
     ap.add_argument("captures", nargs="+")
     ap.add_argument("--out", default="reports/reproduction")
     ap.add_argument("--check-every", type=int, default=5)
-    ap.add_argument("--no-check", action="store_true", help="skip the dlib expression check")
+    ap.add_argument("--no-check", action="store_true", help="skip the expression check")
+    ap.add_argument("--readers", default="dlib", help="detectors of the check: dlib,mediapipe")
+    ap.add_argument("--mp-every", type=int, default=1, help="MediaPipe reads every k-th frame (+ the blinks)")
+    ap.add_argument("--noise-draws", type=int, default=12, help="jittered copies of each image for the still noise")
     ap.add_argument("--png", type=int, nargs="*", default=[], help="frames to save side by side (git-ignored)")
     ap.add_argument("--images", default=None, help="comma-separated subset of the target images")
     ap.add_argument("--modes", default=",".join(MODES))
@@ -262,8 +324,14 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from facebasis.capture.detect import DlibDetector
 
+    from problems.cartoon_check import checked_frames, make_reader, still_noise
+
     det = DlibDetector()
     images = target_images(det)
+    names = [] if args.no_check else args.readers.split(",")
+    detectors = {r: (det if r == "dlib" else make_reader(r)) for r in names}
+    noise = {im[0]: {r: still_noise(im[1], d, features, args.noise_draws) for r, d in detectors.items()}
+             for im in images} if names else {}
     if args.images:
         keep = args.images.split(",")
         images = [im for im in images if im[0] in keep]
@@ -273,7 +341,10 @@ def main(argv=None):
     for cdir in args.captures:
         cap = read_capture(cdir)
         clip = Path(cdir).name
-        src = None if args.no_check or cap.video is None else source_features(cap, det, args.check_every)
+        readers = {r: (d, checked_frames(cap.n_frames, args.mp_every if r == "mediapipe" else args.check_every,
+                                         cap.landmarks))
+                   for r, d in detectors.items()}
+        src = None if not readers or cap.video is None else source_features(cap, readers)
         src_frames = {}
         if args.png and cap.video is not None:
             from facebasis.retarget.media import read_video_frames
@@ -286,8 +357,8 @@ def main(argv=None):
         for name, img, lm in images:
             shown = {}
             for mode in args.modes.split(","):
-                row, frames = run_one(cap, name, img, lm, mode, None if args.no_check else det, args.check_every,
-                                      src, set(args.png), args.warp_every)
+                row, frames = run_one(cap, name, img, lm, mode, readers, src, set(args.png), args.warp_every,
+                                      noise.get(name))
                 row = {"clip": clip, **row}
                 rows.append(row)
                 shown[mode] = frames

@@ -14,10 +14,14 @@ along a ramp of ``--steps`` frames, from rest to a strong expression (in eye-cor
   gap, 15% of the rest).
 
 The cartoon is driven through :meth:`facebasis.retarget.warp2d.CartoonAnimator.drive` (the default:
-head still, fold-free, contacts closed), dlib is run on every output frame, and the table gives,
-per (image, measure): frames where dlib found a face, the Pearson correlation between the measure
-on dlib's landmarks and on the warped landmarks (``r_read``), and the slope of dlib's reading
-against the warped one (``gain``: 1 = read back in full, 0 = not seen). A measure the detector
+head still, fold-free, contacts closed), each detector of ``--readers`` (dlib, MediaPipe in
+static-image mode, :mod:`problems.cartoon_check`) is run on every output frame, and the table gives,
+per (image, detector, measure): frames where it found a face, the Pearson correlation between the
+measure on its landmarks and on the warped landmarks (``r_read``), the slope of its reading against
+the warped one (``gain``: 1 = read back in full, 0 = not seen), its still noise on the unwarped image
+(``still_noise``: the measure's standard deviation over 12 sub-pixel shifts,
+:func:`problems.cartoon_check.still_noise`) and ``range_over_noise`` = gain x warped range / still
+noise (how many noise widths the strongest expression moves the reading). A measure the detector
 cannot read back on an image caps the expression check of every clip on that image, whatever the
 warp does.
 """
@@ -59,8 +63,10 @@ def ramp(landmarks, feature: str, steps: int) -> np.ndarray:
     return P
 
 
-def readback(name, image, landmarks, detector, steps: int, amplitude: str) -> list[dict]:
-    """Rows of the table for one image."""
+def readback(name, image, landmarks, detector, steps: int, amplitude: str, reader: str = "dlib",
+             noise=None) -> list[dict]:
+    """Rows of the table for one image and one detector (``reader``; ``noise`` (F,) its still noise on the
+    image, :func:`problems.cartoon_check.still_noise`)."""
     from scipy.spatial import Delaunay
 
     from facebasis.retarget.warp2d import CartoonAnimator
@@ -80,8 +86,11 @@ def readback(name, image, landmarks, detector, steps: int, amplitude: str) -> li
         read = np.array(read)
         ok = np.isfinite(read)
         gain = float(np.polyfit(warped[ok], read[ok], 1)[0]) if ok.sum() >= 3 else float("nan")
-        rows.append({"image": name, "feature": feature, "detected": int(ok.sum()), "frames": steps,
-                     "warped_range": float(np.ptp(warped)), "r_read": correlation(read, warped), "gain": gain})
+        sd = float(noise[k]) if noise is not None else float("nan")
+        rows.append({"image": name, "reader": reader, "feature": feature, "detected": int(ok.sum()), "frames": steps,
+                     "warped_range": float(np.ptp(warped)), "r_read": correlation(read, warped), "gain": gain,
+                     "still_noise": sd, "range_over_noise": abs(gain) * float(np.ptp(warped)) / sd if sd > 0 else
+                     float("nan")})
     return rows
 
 
@@ -90,15 +99,22 @@ def main(argv=None):
     ap.add_argument("--out", default="reports/reproduction")
     ap.add_argument("--steps", type=int, default=9)
     ap.add_argument("--amplitude", default="feature")
+    ap.add_argument("--readers", default="dlib,mediapipe", help="detectors reading the ramps back")
+    ap.add_argument("--noise-draws", type=int, default=12)
     args = ap.parse_args(argv)
     from facebasis.capture.detect import DlibDetector
     from facebasis.report.tables import write_table
 
+    from problems.cartoon_check import make_reader, still_noise
+
     det = DlibDetector()
+    readers = {r: (det if r == "dlib" else make_reader(r)) for r in args.readers.split(",")}
     rows = []
     for name, img, lm in target_images(det):
-        for row in readback(name, img, lm, det, args.steps, args.amplitude):
-            rows.append(row)
+        for r, reader in readers.items():
+            noise = still_noise(img, reader, features, args.noise_draws)
+            for row in readback(name, img, lm, reader, args.steps, args.amplitude, r, noise):
+                rows.append(row)
             print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

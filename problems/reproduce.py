@@ -361,21 +361,30 @@ RECIPES: tuple[Recipe, ...] = (
            (f"{PY} problems.bench_capture_expression --cache {{tmp}}/detections",),
            data=("video", "detect", "mediapipe"), script="problems/bench_capture_expression.py"),
     Recipe("cartoon-expression", "Expressions kept on the shared clips, per feature: capture / warp / detector "
-           "read-back / check correlations, one scale (uniform) against the per-feature amplitude (still), "
-           "detector and tracking-only captures",
+           "read-back / check correlations with dlib (every 10th frame + the blinks) and MediaPipe (every 2nd + the "
+           "blinks) as the reading detector, each detector's gain, still noise and the read-back that noise allows; "
+           "one scale (uniform) against the per-feature amplitude (still), detector and tracking-only captures",
            ("reproduction/cartoon_expression.csv", "reproduction/cartoon_expression.md"),
            CAPTURES + TRACKED + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
                                  "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --modes uniform,still "
                                  "--images cartoon,cartoon-closed,astronaut,astronaut-painted,cameraman "
-                                 "--check-every 10 --warp-every 20 --out {tmp}/expression",
+                                 "--readers dlib,mediapipe --check-every 10 --mp-every 2 --warp-every 20 "
+                                 "--out {tmp}/expression",
                        "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",
                        "cp {tmp}/expression/bench_cartoon.md reports/reproduction/cartoon_expression.md"),
-           data=("video", "detect"), script="problems/bench_cartoon.py"),
-    Recipe("cartoon-readback", "Known expression ramps warped onto every target image and read back by dlib: "
-           "which measures a detector can see on a drawn, photographed or painted face",
+           data=("video", "detect", "mediapipe"), script="problems/bench_cartoon.py"),
+    Recipe("capture-features", "The dlib and tracking-only captures' expression measures against dlib and "
+           "MediaPipe on the source video, per quarter of each take: what the painting check can reach",
+           ("reproduction/capture_features.csv", "reproduction/capture_features.md"),
+           CAPTURES + TRACKED + (f"{PY} problems.capture_features cap12={{tmp}}/cap12_edit_det,{{tmp}}/cap12_edit_track "
+                                 "cap13={tmp}/cap13_edit2_det,{tmp}/cap13_edit2_track --out reports/reproduction",),
+           data=("video", "detect", "mediapipe"), script="problems/capture_features.py"),
+    Recipe("cartoon-readback", "Known expression ramps warped onto every target image and read back by dlib and "
+           "MediaPipe, with each detector's still noise on the image: which measures a detector can see on a drawn, "
+           "photographed or painted face",
            ("reproduction/cartoon_readback.csv", "reproduction/cartoon_readback.md"),
-           (f"{PY} problems.cartoon_readback --out reports/reproduction",),
-           data=("detect",), script="problems/cartoon_readback.py"),
+           (f"{PY} problems.cartoon_readback --readers dlib,mediapipe --out reports/reproduction",),
+           data=("detect", "mediapipe"), script="problems/cartoon_readback.py"),
     Recipe("cartoon-expression-check", "dlib's reading of the animated cartoon's expression against the source",
            ("reproduction/cartoon_expression_check.csv",), (), data=("video", "detect"),
            script="problems/bench_cartoon.py",

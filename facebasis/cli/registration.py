@@ -92,8 +92,10 @@ def register(subparsers) -> None:
     p.add_argument("--detail-basis", default=None, action=Once, choices=("kernel", "spectral"),
                    help="the detail field's basis: 'kernel' (default), the leading functions of a squared-exponential "
                         "covariance in 3D at inducing points about 1.1 cm apart on ICT (Nystrom; 300 hold 96%% of its "
-                        "variance, 1.5 s CPU once per template); 'spectral', the template's first Laplace-Beltrami "
-                        "eigenfunctions (the previous default, with --detail-modes 150; 150 hold 82%%, 300 cost 10 s)")
+                        "variance at the median vertex, 1.5 s CPU once per template); 'spectral', the template's first Laplace-Beltrami "
+                        "eigenfunctions (the previous field, with --detail-modes 150; the joint fit still pairs every skin vertex "
+                        "for 20 rounds, the former fit paired 5000 for 40; 150 hold 82%% of the variance on average, "
+                        "300 cost 10 s)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -107,6 +107,9 @@ from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 NOISE_PRIOR_FLOOR = 1e-3
 #: the kernel basis' inducing points: one per cell of this many lengths ``l`` (eq. D3)
 INDUCING_CELL = 0.6
+#: at most this many inducing points (a length short against the part's size gets a longer cell: the
+#: kernel matrix between them is dense, 128 MB at 4000)
+MAX_INDUCING = 4000
 #: the field's bases (:class:`DetailPriorOptions`.basis)
 BASES = ("kernel", "spectral")
 
@@ -153,7 +156,8 @@ class DetailPriorOptions:
         non-rigid ICP the offsets are not along the normals
     unseen_samples : at most this many seen vertices condition that extension (a seeded sample)
     fit_samples : at most this many of the part's vertices (a seeded sample) pair with the scan in the joint fit
-        (the modes-only fit keeps ``ModelFitOptions.samples``, 5000): the field's functions need more data
+        that continues from the modes-only fit (``noise_prior``; the modes-only fit, and the joint fit from the
+        template with the fixed prior, keep ``ModelFitOptions.samples``, 5000): the field's functions need more data
         than the modes (default: every vertex of ICT's 14062; with 5000, ~2800 kept pairs for 400 unknowns)
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
@@ -250,8 +254,13 @@ def _kernel_basis(V: np.ndarray, F: np.ndarray, ell: float, modes: int, chunk: i
     from scipy.linalg import eigh
     from scipy.spatial.distance import cdist
 
-    key = np.floor((V - V.min(0)) / (INDUCING_CELL * ell)).astype(np.int64)
-    Z = V[np.sort(np.unique(key, axis=0, return_index=True)[1])]
+    cell = INDUCING_CELL * ell
+    while True:                          # at most MAX_INDUCING points: a longer cell for a short length
+        key = np.floor((V - V.min(0)) / cell).astype(np.int64)
+        Z = V[np.sort(np.unique(key, axis=0, return_index=True)[1])]
+        if len(Z) <= MAX_INDUCING:
+            break
+        cell *= np.sqrt(len(Z) / MAX_INDUCING)
     m = len(Z)
     J = int(min(modes, m))
     lam, U = eigh(np.exp(-cdist(Z, Z, "sqeuclidean") / (2.0 * ell ** 2)), subset_by_index=[m - J, m - 1])
@@ -337,14 +346,14 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     opts = reg.options.detail
     if opts.modes == 0:
         return plain
-    fo = dataclasses.replace(reg.options.identity_fit, samples=opts.fit_samples)
+    fo = reg.options.identity_fit                 # the fixed prior: the joint fit from the template as it was
     part = slice(None) if reg.skin is None else reg.skin
     if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves; continued.
         # The joint fit pairs about as large a share of its candidate vertices as the modes-only fit did
-        n = len(P[part])
-        pairs = plain.pairs * min(opts.fit_samples, n) / min(reg.options.identity_fit.samples, n)
-        fo = dataclasses.replace(fo, prior=noise_prior(plain, h, fo.prior, pairs), prior_start=None,
-                                 iterations=opts.fit_iterations)
+        n = len(P) if reg.skin is None else len(reg.skin)       # the part's vertices, without copying them
+        pairs = plain.pairs * min(opts.fit_samples, n) / min(fo.samples, n)
+        fo = dataclasses.replace(fo, samples=opts.fit_samples, prior=noise_prior(plain, h, fo.prior, pairs),
+                                 prior_start=None, iterations=opts.fit_iterations)
     out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
                               reg.options.normal_stage, use=reg.skin)
     icp = reg.nricp if reg.skin is None else reg._skin_icp

@@ -3,10 +3,12 @@
 A scan never shows a template's mouth and eye sockets (ICT's 2814 of 14062 vertices) and leaves holes
 (ears, the lips' and eyelids' rims). After the identity fit with the detail prior (:mod:`.detailprior`)
 and the normal stage (:mod:`.normalstage`) those vertices hold the modes plus whatever the field's
-Laplace-Beltrami eigenfunctions and the normal stage's Laplacian carry there: both extend the detail
-*along the surface*, where a socket is a long tube from its rim although its inside lies within a
+functions and the normal stage's Laplacian carry there. The normal stage (and the field's
+Laplace-Beltrami eigenfunctions, the ``spectral`` basis, the default when this was measured) extend the
+detail *along the surface*, where a socket is a long tube from its rim although its inside lies within a
 centimetre or two of the seen face in space, and the first 150 eigenfunctions barely resolve such thin
-parts. Measured on the ICT rig benchmark's ``detail`` persons (a smooth field along the normals, outside
+parts (the ``kernel`` basis, now the default, is 3D, but the normal stage still acts along the surface).
+Measured on the ICT rig benchmark's ``detail`` persons (a smooth field along the normals, outside
 any identity basis; ``problems/bench_registration_rig.py``), the right eye socket of seed 0 lay 0.143 cm
 off (median), the modes alone there 0.089, the person's field itself ~0.08 cm RMS.
 

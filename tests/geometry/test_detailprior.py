@@ -109,8 +109,9 @@ def test_detail_outside_the_space_no_longer_slides_the_fitted_correspondence():
         err = np.linalg.norm(res.vertices - truth, axis=1)
         out[m, noise] = np.abs(res.model.coefficients - c).max(), np.median(err), np.percentile(err, 95)
         assert len(res.model.coefficients) == len(c) and set(res.report()["identity"]["coefficients"]) == set(basis.names)
-    # modes only: the modes also take the field, so their coefficients and the points slide (measured 0.43,
-    # 0.035 / 0.121 cm); with the field beside them: 0.18, 0.029 / 0.084
+    # modes only: the modes also take the field, so their coefficients and the points slide (measured with
+    # the spectral basis, the default then: 0.43, 0.035 / 0.121 cm; with the field beside them: 0.18,
+    # 0.029 / 0.084; the kernel basis, the default now, passes the same bounds)
     fixed, plain, noise = out[60, False], out[0, False], out[60, True]
     assert fixed[0] < 0.6 * plain[0]
     assert fixed[1] < 0.9 * plain[1] and fixed[2] < 0.8 * plain[2]
@@ -301,3 +302,41 @@ def test_cli_detail_basis_bad_value_repeat_without_the_prior_and_reaching_the_re
         assert main(base + given) == 0
         assert seen["opts"].detail == DetailPriorOptions(modes=300 if not given else 150, basis=basis)
     assert DetailPriorOptions().basis == "kernel"  # the CLI's default is the library's
+
+
+@pytest.mark.parametrize("noise", [True, False])
+def test_the_joint_fit_gets_its_samples_rounds_and_pair_count(monkeypatch, noise):
+    """The joint fit's data (fit_samples, fit_iterations) and eq. D2's pair count reach fit_shape_model when
+    it continues from the modes-only fit; with the fixed prior it is the joint fit from the template as it
+    was (the modes-only fit's samples, rounds and prior). The modes-only fit samples 1000 of the face's 4497
+    vertices, the joint fit 3000, so eq. D2 counts the plain fit's pairs times 3000 / 1000."""
+    from facebasis.geometry import detailprior
+    from facebasis.geometry.shapemodel import ModelFitOptions
+
+    T, F, basis, c, S, G, truth = _person_with_detail()
+    seen, original, prior_of = [], detailprior.fit_shape_model, detailprior.noise_prior
+
+    def spy(*a, **kw):
+        seen.append(a[5])                          # the options (positional, as fit_with_detail passes them)
+        return original(*a, **kw)
+
+    pairs = []
+
+    def prior_spy(fit, h, ceiling, p=None):
+        pairs.append((fit.pairs, p, prior_of(fit, h, ceiling, p)))
+        return pairs[-1][2]
+
+    monkeypatch.setattr(detailprior, "fit_shape_model", spy)
+    monkeypatch.setattr(detailprior, "noise_prior", prior_spy)
+    fit_opts = ModelFitOptions(samples=1000)
+    opts = RegistrationOptions(identity_fit=fit_opts, detail=DetailPriorOptions(modes=40, noise_prior=noise,
+                                                                                fit_samples=3000, fit_iterations=7))
+    Registration(T, F, opts, identity=basis).register(S, G)
+    assert len(seen) == 1
+    if noise:
+        assert (seen[0].samples, seen[0].iterations) == (3000, 7)
+        assert len(pairs) == 1 and pairs[0][1] == pytest.approx(pairs[0][0] * 3000 / 1000)
+        assert seen[0].prior == pairs[0][2] and seen[0].prior_start is None
+    else:
+        assert (seen[0].samples, seen[0].iterations, seen[0].prior) == (1000, fit_opts.iterations, fit_opts.prior)
+        assert not pairs

@@ -17,7 +17,6 @@ real face can reach at all). Writes ``capture_features.csv`` / ``.md``.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -71,7 +70,7 @@ def main(argv=None):
     ap.add_argument("--dlib-every", type=int, default=3)
     args = ap.parse_args(argv)
     from facebasis.capture.trackfile import read_capture
-    from facebasis.report.tables import write_table
+    from problems.cartoon_check import row_text, write_rows_table
 
     rows = []
     for spec in args.clips:
@@ -79,12 +78,8 @@ def main(argv=None):
         det_dir, trk_dir = dirs.split(",")
         for row in rows_for_clip(clip, read_capture(det_dir), read_capture(trk_dir), args.dlib_every):
             rows.append(row)
-            print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cols = list(rows[0])
-    write_table(out, "capture_features", cols, [[r[c] for c in cols] for r in rows], floatfmt="{:.3g}")
-    print(f"wrote {out / 'capture_features.csv'} and capture_features.md")
+            print(row_text(row), flush=True)
+    write_rows_table(args.out, "capture_features", rows)
 
 
 if __name__ == "__main__":

@@ -33,6 +33,24 @@ import numpy as np
 READERS = (("dlib", ""), ("mediapipe", "mp_"))
 
 
+def row_text(row: dict) -> str:
+    """One result row as ``key=value`` words (floats to 3 significant digits): the benches' progress line."""
+    return " ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items())
+
+
+def write_rows_table(out, name: str, rows: list[dict]) -> None:
+    """``name``.csv and .md under ``out`` (made if missing) from dict rows, columns in the first row's order."""
+    from pathlib import Path
+
+    from facebasis.report.tables import write_table
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cols = list(rows[0])
+    write_table(out, name, cols, [[r[c] for c in cols] for r in rows], floatfmt="{:.3g}")
+    print(f"wrote {out / (name + '.csv')} and {name}.md")
+
+
 def make_reader(name: str):
     """A detector reading single pictures: dlib, or MediaPipe in static-image mode."""
     from facebasis.capture.detect import DlibDetector, MediaPipeDetector

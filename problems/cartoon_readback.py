@@ -29,7 +29,6 @@ warp does.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -103,9 +102,8 @@ def main(argv=None):
     ap.add_argument("--noise-draws", type=int, default=12)
     args = ap.parse_args(argv)
     from facebasis.capture.detect import DlibDetector
-    from facebasis.report.tables import write_table
 
-    from problems.cartoon_check import make_reader, still_noise
+    from problems.cartoon_check import make_reader, row_text, still_noise, write_rows_table
 
     det = DlibDetector()
     readers = {r: (det if r == "dlib" else make_reader(r)) for r in args.readers.split(",")}
@@ -115,12 +113,8 @@ def main(argv=None):
             noise = still_noise(img, reader, features, args.noise_draws)
             for row in readback(name, img, lm, reader, args.steps, args.amplitude, r, noise):
                 rows.append(row)
-            print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cols = list(rows[0])
-    write_table(out, "cartoon_readback", cols, [[r[c] for c in cols] for r in rows], floatfmt="{:.3g}")
-    print(f"wrote {out / 'cartoon_readback.csv'} and cartoon_readback.md")
+            print(row_text(row), flush=True)
+    write_rows_table(args.out, "cartoon_readback", rows)
 
 
 if __name__ == "__main__":

@@ -121,7 +121,8 @@ def area_samples(V: np.ndarray, F: np.ndarray, k: int, rng: np.random.Generator)
 
 
 def principal_frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Area-weighted centroid (3,), principal axes (3, 3) as columns, RMS radius of a surface."""
+    """Area-weighted centroid (3,), principal axes (3, 3) as columns of a proper rotation (largest
+    variance first, determinant +1), RMS radius of a surface."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     w = area / area.sum()
@@ -131,7 +132,12 @@ def principal_frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarra
     g = corners.sum(1)
     cov = (np.einsum("t,tki,tkj->ij", w, corners, corners) + np.einsum("t,ti,tj->ij", w, g, g)) / 12.0
     evals, evecs = np.linalg.eigh(cov)
-    return centroid, evecs[:, ::-1], float(np.sqrt(max(evals.sum(), 1e-300)))
+    axes = evecs[:, ::-1].copy()
+    # a right-handed frame: eigh's signs are arbitrary, and with one frame left-handed every one of the 24
+    # proper candidate rotations As G At^T would be a reflection (issue #27: seed-2 scans landed 33 deg off)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1.0
+    return centroid, axes, float(np.sqrt(max(evals.sum(), 1e-300)))
 
 
 def _cube_rotations() -> list[np.ndarray]:

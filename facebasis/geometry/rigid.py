@@ -26,6 +26,8 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import parameter_error
+
 
 @dataclass(frozen=True)
 class Similarity:
@@ -89,6 +91,20 @@ class RigidOptions:
     seed: int = 0
     scale: bool = True
     plane_iterations: int = 50
+
+    def __post_init__(self):
+        least = {"samples": 10, "candidate_iterations": 0, "refine_candidates": 1, "refine_iterations": 0,
+                 "plane_iterations": 0, "seed": 0}
+        for k, lo in least.items():
+            v = getattr(self, k)
+            if isinstance(v, bool) or not (isinstance(v, (int, np.integer)) and v >= lo):
+                raise parameter_error(f"rigid_{k}", f"an integer >= {lo}", repr(v), label=f"rigid.{k}")
+        for k in ("keep_template", "keep_scan"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and 0 < v <= 1):
+                raise parameter_error(f"rigid_{k}", "a fraction in (0, 1]", repr(v), label=f"rigid.{k}")
+        if not isinstance(self.scale, (bool, np.bool_)):
+            raise parameter_error("rigid_scale", "True or False", repr(self.scale), label="rigid.scale")
 
 
 def umeyama(A: np.ndarray, B: np.ndarray, scale: bool = True) -> Similarity:

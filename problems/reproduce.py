@@ -297,6 +297,13 @@ RECIPES: tuple[Recipe, ...] = (
                  f"--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 48 --unseen off "
                  f"--out reports/registration/regions48_pivot_seed{s}" for s, k in ((0, "detail"), (1, "in-space"))),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-rigid-frames", "Issue #27: seeds 2 and 3 after the rigid stage's principal frames "
+           "were made right-handed (seed 2's scans had landed 26-53 deg off: neutral 3.6 cm median before)",
+           tuple(f"registration/rigid_frames_seed23/{f}" for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 2 3 --persons in-space --train 12 "
+            "--no-baseline --fit-modes 100 --after-model normal --regions 48 "
+            "--out reports/registration/rigid_frames_seed23",),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1-modes-only", "Seed 1, 60 modes, the modes-only identity fit (no detail prior): "
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",

@@ -26,6 +26,8 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import parameter_error
+
 
 @dataclass(frozen=True)
 class Similarity:
@@ -90,6 +92,20 @@ class RigidOptions:
     scale: bool = True
     plane_iterations: int = 50
 
+    def __post_init__(self):
+        least = {"samples": 10, "candidate_iterations": 0, "refine_candidates": 1, "refine_iterations": 0,
+                 "plane_iterations": 0, "seed": 0}
+        for k, lo in least.items():
+            v = getattr(self, k)
+            if isinstance(v, bool) or not (isinstance(v, (int, np.integer)) and v >= lo):
+                raise parameter_error(f"rigid_{k}", f"an integer >= {lo}", repr(v), label=f"rigid.{k}")
+        for k in ("keep_template", "keep_scan"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and 0 < v <= 1):
+                raise parameter_error(f"rigid_{k}", "a fraction in (0, 1]", repr(v), label=f"rigid.{k}")
+        if not isinstance(self.scale, (bool, np.bool_)):
+            raise parameter_error("rigid_scale", "True or False", repr(self.scale), label="rigid.scale")
+
 
 def umeyama(A: np.ndarray, B: np.ndarray, scale: bool = True) -> Similarity:
     """Least-squares similarity with ``B ~ s R A + t`` (Umeyama 1991, eq. 40-42).
@@ -121,7 +137,8 @@ def area_samples(V: np.ndarray, F: np.ndarray, k: int, rng: np.random.Generator)
 
 
 def principal_frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Area-weighted centroid (3,), principal axes (3, 3) as columns, RMS radius of a surface."""
+    """Area-weighted centroid (3,), principal axes (3, 3) as columns of a proper rotation (largest
+    variance first, determinant +1), RMS radius of a surface."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     w = area / area.sum()
@@ -131,7 +148,12 @@ def principal_frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarra
     g = corners.sum(1)
     cov = (np.einsum("t,tki,tkj->ij", w, corners, corners) + np.einsum("t,ti,tj->ij", w, g, g)) / 12.0
     evals, evecs = np.linalg.eigh(cov)
-    return centroid, evecs[:, ::-1], float(np.sqrt(max(evals.sum(), 1e-300)))
+    axes = evecs[:, ::-1].copy()
+    # a right-handed frame: eigh's signs are arbitrary, and with one frame left-handed every one of the 24
+    # proper candidate rotations As G At^T would be a reflection (issue #27: seed-2 scans landed 33 deg off)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1.0
+    return centroid, axes, float(np.sqrt(max(evals.sum(), 1e-300)))
 
 
 def _cube_rotations() -> list[np.ndarray]:

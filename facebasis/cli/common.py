@@ -21,7 +21,7 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "amplitude": "--amplitude", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
          "detail_basis": "--detail-basis",
          "rest_anchor": "--rest-anchor", "focal": "--focal", "noise_model": "--noise-model",
-         "point_noise": "--point-noise"}
+         "point_noise": "--point-noise", "gaze": "--gaze"}
 
 #: a command whose flag for a library parameter is not :data:`FLAGS`'s (``landmarks``' ``--frame`` is
 #: :func:`facebasis.capture.video.read_frame`'s ``index``)

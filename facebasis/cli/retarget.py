@@ -54,7 +54,7 @@ def cmd_retarget(args) -> int:
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
                      preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
                      rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model,
-                     point_noise=args.point_noise)
+                     point_noise=args.point_noise, gaze=args.gaze)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -83,6 +83,10 @@ def _camera_args(p) -> None:
                    help="'per-point' (default): every landmark's own noise is estimated from the capture and a "
                         "landmark the rig reproduces worse than the typical one weighs less (a detector's jaw "
                         "line or brows, an eyelid); 'shared': one noise for all landmarks (the former model)")
+    p.add_argument("--gaze", default=None, action=Once, choices=("conjugate", "free"),
+                   help="'conjugate' (default): the two eyes look the same way (a prior on the difference of the "
+                        "rig's eyeLook{Up,Down,In,Out} left/right pairs: landmarks see no iris, only the lids); "
+                        "'free': each eye's look shapes on their own (the former model)")
 
 
 def register(subparsers) -> None:

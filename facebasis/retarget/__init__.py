@@ -23,6 +23,7 @@ drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)
 rigoptions the rig fit's identity mode, landmark vertex indices and exclusive pairs, checked
 pointnoise each landmark's own noise from the pilot fits: a landmark the rig reproduces worse weighs less
+gaze       conjugate gaze: a prior that the two eyes look the same way (landmarks see lids, not irises)
 framefit   one frame's pose/weight fit with frozen settings (:class:`FrameSolver`, :class:`FrameFit`)
 pose       weak-perspective head pose: Rodrigues, projection, closed-form and Gauss-Newton fits
 observe    which shapes the landmarks can tell apart (:func:`identifiability`)

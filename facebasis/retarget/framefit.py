@@ -87,6 +87,8 @@ class FrameSolver:
         pilot fits, :meth:`.rigdrive.RigRetargeter.pilot_stats`)
     point_weights : None, or (L,) square-root weights of the landmarks' residuals in both steps (the
         per-point noise model, :mod:`.pointnoise`; on top of the contour's sliding)
+    tie : None, or (k, k) a Gaussian prior on differences of weights per unit ridge: the weight step adds
+        ``ridge * tie`` to its Gram matrix (the conjugate gaze prior, :func:`.gaze.gaze_tie`)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
         centre (2,) its principal point, px (see :meth:`flatten`)
     """
@@ -106,6 +108,7 @@ class FrameSolver:
     centre: np.ndarray | None = None
     pixel_scale: float | None = None
     point_weights: np.ndarray | None = None
+    tie: np.ndarray | None = None
 
     @property
     def n_shapes(self) -> int:
@@ -214,6 +217,8 @@ class FrameSolver:
         if self.pixel_scale is not None:                # landmark noise of a fixed size in pixels, not rig units
             E, b = E * (s / self.pixel_scale), b * (s / self.pixel_scale)   # eq. 5's data term weighted (s/s_ref)^2
         G = E.T @ E                                     # data term (1/s^2)||A x - b||^2 = x'Gx - 2c'x + b'b
+        if self.tie is not None:                        # rho (sigma_w/sigma_d)^2 sum (x_a - x_b)^2 (gaze.py)
+            G = G + self.ridge * self.tie
         c = E.T @ b
         lin = self.sparsity * self.ridge          # exponential (sparse) part of the prior, see :mod:`.rigdrive`
         if lin > 1e-6 * np.trace(G) / len(G):     # smaller moves no weight by 1e-6 (and makes DAQP cycle on

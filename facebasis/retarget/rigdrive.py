@@ -26,6 +26,8 @@ previous frame, pose and weights are alternated:
   is a Gaussian of standard deviation 0.5 centred at -1.5, truncated to [0, 1]: a weight stays at 0
   unless the landmarks push it; measured in reports/retarget/plausibility.md);
 
+  plus, with ``gaze="conjugate"``, ``rho (sigma_w / sigma_d)^2 (x_a - x_b)^2`` for each pair of eye-look
+  shapes that move the two eyes the same way (:mod:`.gaze`: landmarks see the lids, not the eyes);
   the data term measured in rig units (divided by s^2), mu the temporal smoothness (default 0.05),
   rho the ridge that keeps shapes the landmarks cannot see, or cannot tell from noise, at zero. Since
   ``mu ||x - x_prev||^2 + rho ||x||^2 = (mu + rho) ||x - mu/(mu + rho) x_prev||^2 + const``,
@@ -74,6 +76,7 @@ from ..geometry.rig import Rig
 from .calibrate import IdentityCalibration, calibrate_auto, calibrate_identity, first_frame_offset, pilot_frames
 from .framefit import RIDGE_FLOOR, FrameFit, FrameSolver, check_camera
 from .observe import Identifiability, identifiability, landmark_jacobian
+from .gaze import GAZE_MODES, conjugate_gaze_pairs, gaze_tie
 from .pointnoise import POINT_NOISE_MODES, noise_floor, point_sigmas, point_weights
 from .reststart import rest_start
 from .rigoptions import DEFAULT_IDENTITY, IDENTITY_MODES, check_landmark_indices, resolve_identity, resolve_pairs
@@ -219,6 +222,8 @@ class RigRetargeter:
     point_noise : "per-point" (the default): every landmark has its own noise, estimated from the pilot
         fits, and a landmark noisier than the typical one weighs less (:mod:`.pointnoise`); "shared":
         one noise for every landmark (the former model)
+    gaze : "conjugate" (the default): the eyes look the same way, a Gaussian prior on the difference of
+        each conjugate eye-look pair the rig has by name (:mod:`.gaze`); "free": no such prior
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
@@ -227,7 +232,7 @@ class RigRetargeter:
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
                  sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True,
                  focal: float | None = None, centre=None, noise_model: str = "pixels",
-                 point_noise: str = "per-point"):
+                 point_noise: str = "per-point", gaze: str = "conjugate"):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -269,6 +274,8 @@ class RigRetargeter:
         focal, centre = check_camera(focal, centre)
         self.noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
         self.point_noise = parse_mode("point_noise", point_noise, POINT_NOISE_MODES, "per-point")
+        self.gaze = parse_mode("gaze", gaze, GAZE_MODES, "conjugate")
+        self.gaze_pairs = conjugate_gaze_pairs(rig.names) if self.gaze == "conjugate" else np.zeros((0, 2), np.int64)
         ipopt = None
         if solver == "ipopt":
             from ..rigging.weights import WeightSolver
@@ -281,7 +288,8 @@ class RigRetargeter:
             D=np.ascontiguousarray(rig.deltas[:, self.indices].transpose(1, 2, 0)),    # (L, 3, k)
             pairs=self.pairs, smooth=self.smooth, ridge=self.ridge, sparsity=self.sparsity,
             contour=self.contour, contour_slide=self.contour_slide, alternations=self.alternations,
-            tol=self.tol, ipopt=ipopt, focal=focal, centre=centre)
+            tol=self.tol, ipopt=ipopt, focal=focal, centre=centre,
+            tie=gaze_tie(rig.n_shapes, self.gaze_pairs, PRIOR_STD))
 
     @property
     def n_landmarks(self) -> int:
@@ -405,4 +413,4 @@ __all__ = ["RigRetargeter", "RetargetResult", "retarget_landmarks", "project_lan
            "rotation_from_vector", "rotation_to_vector", "check_landmark_indices", "resolve_pairs", "Identifiability",
            "identifiability", "landmark_jacobian", "DEFAULT_SMOOTH", "DEFAULT_RIDGE", "DEFAULT_IDENTITY", "IDENTITY_MODES",
            "resolve_identity", "RIDGE_FLOOR", "PRIOR_STD", "PILOT_FRAMES", "auto_ridge", "PI", "NOISE_MODELS",
-           "POINT_NOISE_MODES"]
+           "POINT_NOISE_MODES", "GAZE_MODES"]

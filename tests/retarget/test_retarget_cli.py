@@ -420,3 +420,36 @@ def summary_landmarks(folder) -> int:
     from facebasis.capture.trackfile import read_capture
 
     return read_capture(folder).n_landmarks
+
+
+def test_gaze_option(capture, tmp_path, capsys, monkeypatch):
+    """--gaze conjugate|free reaches the solver (default: the library's, conjugate) and the summary, with the
+    tied pairs (none on the built-in face: it has no eye-look shapes); bad or repeated values are one line
+    with nothing written."""
+    from facebasis.retarget.rigdrive import RigRetargeter
+
+    folder, _ = capture
+    seen = []
+    original = RigRetargeter.__init__
+
+    def spy(self, *a, **kw):
+        seen.append(kw.get("gaze"))
+        original(self, *a, **kw)
+
+    monkeypatch.setattr(RigRetargeter, "__init__", spy)
+    for extra, want in (([], "conjugate"), (["--gaze", "free"], "free"), (["--gaze", "conjugate"], "conjugate")):
+        out = tmp_path / f"gz{len(seen)}"
+        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
+        assert code == 0, stdout
+        assert seen[-1] == want
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["gaze"] == want and summary["gaze_pairs"] == []
+    for argv, msg in ((["--gaze", "left"], "invalid choice: 'left'"),
+                      (["--gaze", "free", "--gaze", "conjugate"], "--gaze")):
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(InputError, match=r"^gaze: expected one of conjugate, free, found 'left'$"):
+        from facebasis.retarget.pipeline import run_retarget
+
+        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", gaze="left")
+    assert not (tmp_path / "out").exists()

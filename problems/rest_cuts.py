@@ -53,29 +53,24 @@ LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
 VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared", "gaze": "free"}, False), "default": ({}, True),
-            "previous": ({"gaze": "free"}, "gated"), "free_gaze": ({"gaze": "free"}, True),
+            "previous": ({"gaze": "free"}, True),
             "no_anchor": ({"rest_anchor": False}, True),
             "rig_noise": ({"noise_model": "rig"}, True),
             "shared_points": ({"point_noise": "shared"}, True)}
 
 
 @contextlib.contextmanager
-def _evidence(on):
-    """``False``: the rest rule before the landmark evidence (rigdrive's ``rest_start`` gives none);
-    ``"gated"``: the evidence's rest face kept only if it fits the pilot frames 2 % better than the rig's
-    neutral (the rule before ``calibrate_rest(gate=False)``)."""
-    import facebasis.retarget.calibrate as cal
+def _evidence(on: bool):
+    """The rest rule before the landmark evidence: rigdrive's ``rest_start`` gives none."""
     import facebasis.retarget.rigdrive as rd
 
-    keep, keep_rest = rd.rest_start, cal.calibrate_rest
+    keep = rd.rest_start
     if not on:
         rd.rest_start = lambda *a, **k: None
-    if on == "gated":
-        cal.calibrate_rest = lambda *a, **k: keep_rest(*a, **{**k, "gate": True})
     try:
         yield
     finally:
-        rd.rest_start, cal.calibrate_rest = keep, keep_rest
+        rd.rest_start = keep
 
 
 def cuts_of(path: str, step: int, length: int, first: int = 0):

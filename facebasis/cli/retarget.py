@@ -85,7 +85,8 @@ def _camera_args(p) -> None:
                         "line or brows, an eyelid); 'shared': one noise for all landmarks (the former model)")
     p.add_argument("--gaze", default=None, action=Once, choices=("conjugate", "free"),
                    help="'conjugate' (default): the two eyes look the same way (a prior on the difference of the "
-                        "rig's eyeLook{Up,Down,In,Out} left/right pairs: landmarks see no iris, only the lids); "
+                        "rig's conjugate eye-look pairs, up with up, down with down, one eye's in with the other's out: "
+                        "landmarks see no iris, only the lids); "
                         "'free': each eye's look shapes on their own (the former model)")
 
 

@@ -21,7 +21,8 @@ folder from ``facebasis rig`` has none):
    from absorbing expressions: only what is present all the time moves into the neutral.
 2. *residual part*: the landmark residual each pilot frame leaves, carried back into the rig frame
    in-plane (``R_f^T Pi^T r_fl / s_f``, no depth, as for the first-frame neutral), and its median
-   over the pilot frames, projected orthogonally to the in-plane landmark motion of all shapes. It holds the differences no shape spans; the projection
+   over the pilot frames, projected orthogonally to the
+   in-plane landmark motion of all shapes. It holds the differences no shape spans; the projection
    keeps it from absorbing an expression and from undoing the weights' lower bound (a free offset
    would move the neutral against a shape so that noise can be fitted with weights on both sides
    of it: measured 0.084 instead of 0.035 weight error at 1 px noise on ICT).
@@ -36,8 +37,10 @@ direction of a shape stays unexplained (the shape rests at 0 and the residual ke
 the residual part has no depth, so it is exact for the head orientations of the pilot frames and
 approximate away from them.
 
-Every calibration takes a :class:`.framefit.FrameSolver` (frozen) and returns an :class:`IdentityCalibration`
-(frozen): the offset and the neutral it settled on; the caller builds ``solver.with_neutral(calibration.neutral)``.
+Every calibration here takes a :class:`.framefit.FrameSolver` (frozen) and returns an
+:class:`IdentityCalibration` (frozen): the offset and the neutral landmarks it settled on. None of
+them changes the solver it is given; the caller builds the solver it needs
+(``solver.with_neutral(calibration.neutral)``).
 """
 
 from __future__ import annotations
@@ -339,8 +342,7 @@ def _fitted_rms(solver: FrameSolver, landmarks, visible, frames) -> float:
 
 def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST_FRAMES,
                    rounds: int = CALIBRATION_ROUNDS, share: float = REST_SHARE,
-                   anchor: bool = False, window=None, rms_before: float | None = None,
-                   gate: bool = True) -> IdentityCalibration:
+                   anchor: bool = False, window=None, rms_before: float | None = None) -> IdentityCalibration:
     """The person's rest face: the densest cluster of the capture's pose-normalised faces.
 
     A face at rest is where a capture spends most of its time, and comes back to between
@@ -358,8 +360,7 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     ``anchor``: the first frame's posture when it recurs (:func:`rest_frames`); ``window`` (frame
     indices of the take's start, at rest by :func:`.reststart.rest_start`): their median posture,
     the window's frames joining the pilot frames. ``rms_before``: the rig neutral's residual of an
-    earlier call on the same capture and solver (the same check frames: not fitted again). ``gate``
-    False: kept whatever the residual says (a window at rest by the landmark evidence, :func:`calibrate_auto`).
+    earlier call on the same capture and solver (the same check frames: not fitted again).
 
     Returns
     -------
@@ -387,7 +388,7 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
         off[:, 2] = 0.0
         moved = moved.shifted(off)
     after = _fitted_rms(moved, P, vis, check)
-    if gate and not after <= (1.0 - REST_MIN_GAIN) * before:
+    if not after <= (1.0 - REST_MIN_GAIN) * before:
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, before, before, float("nan"), False,
                                    neutral=v_start)
     return IdentityCalibration(moved.v0 - v_start, np.zeros(k), frames, before, after, float("nan"), True,
@@ -408,8 +409,7 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True,
        as an expression (mouthStretch on cap13's calm start). ``start`` (a :class:`.reststart.RestStart`,
        the landmark evidence of a 68-point capture) decides: a start that is not still with closed
        lips is never anchored; one that is gives the rest face of its window's median posture
-       (:func:`rest_frames`; by that evidence, not by a lower residual than the rig's neutral, which
-       it does not replace: a dlib cut of cap12 from 20 s, 4 % worse, had jawLeft 0.19 at rest without it), kept unless, as a neutral, it demands more than :data:`ANCHOR_DEMAND_MAX`
+       (:func:`rest_frames`), kept unless, as a neutral, it demands more than :data:`ANCHOR_DEMAND_MAX`
        times the negative weight of step 1's (:func:`.onesided.negative_demand`: a rig's shapes are
        one-sided; a closed-lip smile held at the start is not rest). Without evidence (``start``
        None: other layouts), the first frame's posture is taken when it recurs through the capture
@@ -433,8 +433,7 @@ def calibrate_auto(solver: FrameSolver, landmarks, visible, anchor: bool = True,
     if not anchor or verdict is False:
         return common
     window = None if start is None else start.frames
-    first = calibrate_rest(solver, landmarks, visible, anchor=True, window=window, rms_before=rest.rms_before,
-                           gate=window is None)
+    first = calibrate_rest(solver, landmarks, visible, anchor=True, window=window, rms_before=rest.rms_before)
     if not (first.applied and first.rest_anchored):
         return common
     ratio = demand_ratio(solver, first.neutral, common.neutral, landmarks, visible,

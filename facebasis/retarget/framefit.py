@@ -127,8 +127,8 @@ class FrameSolver:
         :data:`RIDGE_FLOOR`, no sparsity and, if ``plain``, the contour landmarks as fixed points
         (plain least squares: what the neutral or the noise estimate must explain; ``plain=False``
         keeps the contour's sliding, to compare fits as the frames will be solved); every landmark
-        weighs alike (no ``point_weights``)."""
-        return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0, point_weights=None,
+        weighs alike (no ``point_weights``) and no weights are tied (no ``tie``)."""
+        return replace(self, smooth=0.0, ridge=RIDGE_FLOOR, sparsity=0.0, point_weights=None, tie=None,
                        contour_slide=1.0 if plain else self.contour_slide)
 
     def whitened_residual(self, p, fit: "FrameFit") -> np.ndarray:

@@ -13,10 +13,16 @@ difference (:func:`conjugate_gaze_pairs`):
 
 next to the ridge's ``x_i ~ N(0, sigma_w^2)`` (sigma_w = ``PRIOR_STD`` = 0.5 of :mod:`.rigdrive`). In the weight
 step's units (the ridge rho = noise^2 / sigma_w^2) it is the term ``rho (sigma_w / sigma_d)^2 (x_a - x_b)^2``
-(:func:`gaze_tie`); ``sigma_d`` (:data:`GAZE_SD`) 0.05: a vertical difference of 0.05 of ICT's full
-look range is a few degrees, more than eyes ever hold apart; a horizontal one allows the vergence of
-a target at reading distance. Left-right differences of the lid shapes themselves (a wink, one
-squinting eye) stay free: they are real.
+(:func:`gaze_tie`); ``sigma_d`` (:data:`GAZE_SD`) 0.05: a vertical difference of 0.05 of a full look
+is a few degrees, more than eyes hold apart. Horizontally the prior also pulls against vergence (both
+eyes looking in at a near target), which 68 landmarks cannot see either; that was not measured.
+Left-right differences of the lid shapes themselves (a wink, one squinting eye) stay free: they are
+real. The prior scales with the ridge: a ridge of 0 (a temporal term alone) has no prior at all, this
+one included. Names: ICT-FaceKit's ``eyeLookDown_L`` and Apple ARKit's ``eyeLookDownLeft`` spellings.
+
+Measured on the shared clips' cuts (``reports/retarget/rest_cuts_summary.md``): the one-eyed lid signal
+on MediaPipe cap12 from 4 s moves partly from eyeLookDown_L (0.12 on the calm frames) to eyeBlink_L
+(0.06), a lid shape that is allowed one eye.
 """
 
 from __future__ import annotations
@@ -26,8 +32,8 @@ import numpy as np
 #: standard deviation of a conjugate pair's weight difference (module docstring)
 GAZE_SD = 0.05
 #: the conjugate eye-look pairs, ARKit names: each eye's look direction paired with the other eye's same direction
-CONJUGATE = (("eyeLookUp_L", "eyeLookUp_R"), ("eyeLookDown_L", "eyeLookDown_R"),
-             ("eyeLookIn_L", "eyeLookOut_R"), ("eyeLookOut_L", "eyeLookIn_R"))
+CONJUGATE = tuple((f"eyeLook{a}{sa}", f"eyeLook{b}{sb}") for sa, sb in (("_L", "_R"), ("Left", "Right"))
+                  for a, b in (("Up", "Up"), ("Down", "Down"), ("In", "Out"), ("Out", "In")))
 #: the modes of the prior: "conjugate" (pairs found by name) or "free" (no prior)
 GAZE_MODES = ("conjugate", "free")
 

@@ -202,7 +202,8 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
-         + f"; smooth {smooth:g}, ridge {ridge_text}; identity {identity}")
+         + f"; smooth {smooth:g}, ridge {ridge_text}; identity {identity}; gaze {gaze}"
+         + (f" ({len(solver_obj.gaze_pairs)} eye-look pairs tied)" if gaze == "conjugate" else ""))
     result = solver_obj.run(cap.landmarks, cap.lost, cap.fps)
     extra = {"smooth": smooth, "ridge": result.ridge, "ridge_rule": "auto" if ridge == "auto" else "given",
              "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame",

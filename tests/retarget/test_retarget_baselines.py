@@ -16,18 +16,7 @@ def test_before_variants_run_the_former_noise_model():
     assert rest_cuts.VARIANTS["before"][0]["point_noise"] == "shared"
     assert rest_cuts.VARIANTS["shared_points"][0] == {"point_noise": "shared"}
     assert rig_plausibility.VARIANTS["before"]["gaze"] == "free" and rest_cuts.VARIANTS["before"][0]["gaze"] == "free"
-    assert rest_cuts.VARIANTS["previous"] == ({"gaze": "free"}, "gated")      # this round's two changes undone
+    assert rest_cuts.VARIANTS["previous"] == ({"gaze": "free"}, True)         # this round's gaze prior undone
     assert inspect.signature(RigRetargeter).parameters["noise_model"].default == "pixels"   # what "default" runs
     assert inspect.signature(RigRetargeter).parameters["gaze"].default == "conjugate"
 
-
-def test_the_previous_variant_restores_the_residual_gate(monkeypatch):
-    """``previous`` runs calibrate_rest with its gate whatever the caller asks; the patch is undone after."""
-    import facebasis.retarget.calibrate as cal
-
-    seen = []
-    monkeypatch.setattr(cal, "calibrate_rest", lambda *a, **k: seen.append(k.get("gate")))
-    with rest_cuts._evidence("gated"):
-        cal.calibrate_rest(gate=False)
-    cal.calibrate_rest(gate=False)
-    assert seen == [True, False]

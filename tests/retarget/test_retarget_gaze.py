@@ -41,6 +41,8 @@ def test_pairs_are_found_by_name_and_the_tie_vanishes_on_conjugate_weights():
     P = conjugate_gaze_pairs(names)
     assert P.tolist() == [[3, 1], [2, 4]]            # eyeLookUp_R is missing: that pair is not tied
     assert conjugate_gaze_pairs(["jawOpen", "eyeBlink_L", "eyeBlink_R"]).shape == (0, 2)
+    apple = ["eyeLookUpLeft", "eyeLookUpRight", "eyeLookInLeft", "eyeLookOutRight", "eyeLookDown_L"]
+    assert conjugate_gaze_pairs(apple).tolist() == [[0, 1], [2, 3]]          # ARKit's spelling; a lone _L is not a pair
     assert gaze_tie(6, np.zeros((0, 2)), PRIOR_STD) is None
     K = gaze_tie(6, P, PRIOR_STD)
     x = np.array([0.3, 0.2, 0.4, 0.2, 0.4, 0.9])      # both pairs equal: no cost, whatever the rest
@@ -75,8 +77,7 @@ def test_exact_conjugate_gaze_is_recovered_alike_with_and_without_the_prior():
 def test_one_eye_placed_low_does_not_make_that_eye_alone_look_down(seed):
     """One eye's points 1 px low in every frame (0.5 px noise): fitted freely, that eye looks down more
     than the other (median |L - R| of eyeLookDown measured 0.05-0.06 over both seeds); with the prior the
-    difference is bounded by sigma_d's scale: the bias is a shared fraction (0.5 px over a 0.3 cm look
-    at 20 px/cm: ~0.17 of the lid motion, split between the two) and the difference drops at least 3 times."""
+    difference is bounded by sigma_d's scale and drops at least 3 times."""
     rig, idx = gaze_rig()
     X, P = capture(rig, idx, seed, lid_bias_px=1.0)
     a, b = rig.names.index("eyeLookDown_L"), rig.names.index("eyeLookDown_R")
@@ -108,3 +109,22 @@ def test_gaze_values_and_the_default():
     for bad in ("both", 1, "eyeLookDown"):
         with pytest.raises(InputError, match=r"^gaze: expected one of conjugate, free, found "):
             RigRetargeter(rig, idx, gaze=bad)
+
+
+def test_the_pilot_fits_tie_nothing():
+    """The pilot fits are plain least squares (noise, calibration): no prior ties their weights."""
+    g, gi = gaze_rig()
+    model = RigRetargeter(g, gi).model
+    assert model.tie is not None and model.pilot().tie is None and model.pilot(plain=False).tie is None
+    assert model.with_neutral(model.v0).tie is model.tie
+
+
+def test_the_ipopt_path_sees_the_prior():
+    """``solver="ipopt"`` solves the same weight problem (the Gram matrix with the prior): same weights as the
+    certified solver on a capture with one eye placed low."""
+    rig, idx = gaze_rig()
+    _, P = capture(rig, idx, 0, lid_bias_px=1.0)
+    P = P[:12]
+    a = RigRetargeter(rig, idx, solver="ipopt").run(P, fps=30.0).weights
+    b = RigRetargeter(rig, idx).run(P, fps=30.0).weights
+    np.testing.assert_allclose(a, b, atol=2e-3)

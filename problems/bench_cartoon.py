@@ -6,7 +6,7 @@
 
 For every capture folder (``facebasis capture`` output) and every target image (the built-in
 cartoon, the same with its lips closed, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
-(``cv2.stylization``) version of it, with dlib's landmarks), three ways of driving the cartoon:
+(``cv2.stylization``) version of it, with the landmarks ``facebasis landmarks`` gives by default), three ways of driving the cartoon:
 
 * ``paper``: eq. 12 as it is (the head's motion included, no fold handling), the earlier default;
 * ``uniform``: head similarity removed, contacts closed, fold-free warp, one eq. 13 scale for the
@@ -91,12 +91,17 @@ def closed_mouth_cartoon(image, landmarks):
     return anim.frame(closed), closed
 
 
-def target_images(detector):
+def target_images(detector, landmarker=None):
     """[(name, image (H, W, 3) uint8 RGB, landmarks (68, 2))]: several faces, drawn, photographed and
     painted: the built-in cartoon, the same with its lips closed, the same stretched 1.3x wide, scikit-image's astronaut and
-    cameraman photographs and painted versions of both (dlib's landmarks on each)."""
+    cameraman photographs and painted versions of both. The photographs' landmarks are those of
+    ``landmarker`` (default ``detector``): :func:`default_landmarker` is what ``facebasis landmarks`` gives a
+    user by default (MediaPipe when installed). dlib put the turned cameraman's mouth on his nose
+    (0.39 eye distances from MediaPipe's, which is on the mouth): a cartoon driven from those landmarks
+    opens a mouth beside the nose, whatever the warp."""
     import cv2
 
+    landmarker = detector if landmarker is None else landmarker
     face = default_cartoon()
     out = [("cartoon", face.image, face.landmarks), ("cartoon-closed",) + closed_mouth_cartoon(face.image, face.landmarks)]
     wide = cv2.resize(face.image, (int(round(1.3 * 512)), 512), interpolation=cv2.INTER_AREA)
@@ -108,14 +113,24 @@ def target_images(detector):
     except ImportError:
         return out
     for name, photo in photos:
-        lm = detector.detect(photo)
+        lm = landmarker.detect(photo)
         if lm is None:
             continue
         out.append((name, photo, lm))
         painted = _painted(photo)
-        lm_p = detector.detect(painted)
+        lm_p = landmarker.detect(painted)
         out.append((f"{name}-painted", painted, lm if lm_p is None else lm_p))
     return out
+
+
+def default_landmarker():
+    """The detector ``facebasis landmarks`` uses by default (:func:`facebasis.capture.detect.available_detector`:
+    MediaPipe when installed, else dlib), reading single pictures."""
+    from facebasis.capture.detect import available_detector
+
+    from problems.cartoon_check import make_reader
+
+    return make_reader(available_detector())
 
 
 def features(lm):
@@ -327,7 +342,7 @@ def main(argv=None):
     from problems.cartoon_check import checked_frames, make_reader, still_noise
 
     det = DlibDetector()
-    images = target_images(det)
+    images = target_images(det, default_landmarker())
     names = [] if args.no_check else args.readers.split(",")
     detectors = {r: (det if r == "dlib" else make_reader(r)) for r in names}
     noise = {im[0]: {r: still_noise(im[1], d, features, args.noise_draws) for r, d in detectors.items()}

@@ -8,9 +8,10 @@ reads as an opening. A
 capture mesh cut open along closed lips (:func:`mouth_is_cut`) has no triangle there at all, and the
 target's still pixels showed through the gap.
 
-:func:`fill_mouth` therefore draws the opening, the inner-lip polygon (iBUG 60-67) of the frame, as
-a dark mouth interior as it opens beyond the target's own mouth, whether the capture mesh is cut or
-not, with the opacity :func:`opening_opacity` ``clip(A_t / A_rest - 1, 0, 1)`` (``A`` the polygon's
+The warp therefore draws the opening, the inner-lip polygon (iBUG 60-67) of the frame, as a mouth
+interior as it opens beyond the target's own mouth, whether the capture mesh is cut or not: painted
+with teeth, cavity and tongue (:func:`.mouthpaint.paint_mouth`; :func:`fill_mouth`, one flat dark colour,
+is the former drawing and the baseline it was measured against), with the opacity :func:`opening_opacity` ``clip(A_t / A_rest - 1, 0, 1)`` (``A`` the polygon's
 area over the squared mouth width, ``A_rest`` the target's own, at least a quarter pixel): the target at rest is left exactly as it
 is drawn (a capture that does not move leaves the cartoon unchanged), a closed-mouth painting driven
 open shows a dark opening as large as the opening (its ``A_rest`` is about 0, so any opening is

@@ -1,0 +1,125 @@
+"""An open mouth painted as a mouth: a shaded interior with upper teeth and a tongue.
+
+:func:`.mouth2d.fill_mouth` darkens the inner-lip polygon with one flat colour. A face detector
+trained on photographs reads a flat dark polygon poorly: on a painted face MediaPipe put both lips
+on the upper lip (it read the opening as closing), dlib saw about half of it. A real open mouth
+shows, from the upper lip down, a light band of upper teeth, a dark cavity (darkest in the middle,
+the back of the mouth) and the tongue's lighter red over the lower lip. :func:`paint_mouth` draws
+that inside the inner-lip polygon (iBUG 60-67), in the mouth's own frame (the axis from corner 60
+to corner 64), so that it turns and stretches with the mouth:
+
+* ``s`` in [0, 1] runs from the upper inner lip (61-63) down to the lower one (65-67) at each
+  position ``u`` in [0, 1] along the mouth (both lips interpolated piecewise-linearly in ``u``);
+* the teeth band covers ``s`` below ``min(TEETH_SHARE h, TEETH_WIDTH w) / h`` (``h`` the local
+  opening, ``w`` the mouth width), narrowing towards the corners (``sqrt(1 - (2u - 1)^2)``);
+* the tongue covers the band of the same form above the lower lip (``TONGUE_SHARE``,
+  ``TONGUE_WIDTH``);
+* the cavity between them goes from :data:`CAVITY_EDGE_RGB` at the lips to
+  :data:`CAVITY_BACK_RGB` in the middle.
+
+Every transition is a linear ramp one pixel wide and the polygon's edge is cv2's anti-aliased
+fill, blended with the caller's opacity; pixels outside the polygon's anti-aliased edge are never
+touched. Vectorised over the polygon's bounding box.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: teeth, cavity (at the lips and at the back) and tongue colours (RGB)
+TEETH_RGB = (226, 220, 204)
+CAVITY_EDGE_RGB = (92, 34, 40)
+CAVITY_BACK_RGB = (34, 10, 14)
+TONGUE_RGB = (168, 72, 82)
+#: the teeth band: its share of the local opening and its largest height in mouth widths
+TEETH_SHARE, TEETH_WIDTH = 0.35, 0.09
+#: the tongue band, likewise above the lower lip
+TONGUE_SHARE, TONGUE_WIDTH = 0.3, 0.1
+
+
+def _lip_curve(u_pts, v_pts, u):
+    """The lip's offset v at positions u (piecewise linear; the lip's u made non-decreasing)."""
+    u_pts = np.maximum.accumulate(u_pts)
+    return np.interp(u, u_pts, v_pts)
+
+
+def mouth_coordinates(inner_lip, x, y):
+    """Coordinates of pixels (x, y) (any equal shapes) in the mouth's frame of the inner-lip polygon
+    (8, 2): ``u`` along the mouth (0 at corner 60, 1 at corner 64), ``s`` from the upper lip (0) to
+    the lower lip (1), the local opening ``h`` and the mouth width ``w`` in pixels."""
+    P = np.asarray(inner_lip, np.float64)
+    axis = P[4] - P[0]
+    w = max(float(np.hypot(*axis)), 1e-9)
+    e = axis / w
+    n = np.array([-e[1], e[0]])
+    rel = P - P[0]
+    pu, pv = rel @ e / w, rel @ n
+    if pv[[5, 6, 7]].mean() < pv[[1, 2, 3]].mean():       # n points from the upper lip to the lower
+        n, pv = -n, -pv
+    dx, dy = np.asarray(x, np.float64) - P[0, 0], np.asarray(y, np.float64) - P[0, 1]
+    u = np.clip((dx * e[0] + dy * e[1]) / w, 0.0, 1.0)
+    v = dx * n[0] + dy * n[1]
+    up = _lip_curve(pu[[0, 1, 2, 3, 4]], pv[[0, 1, 2, 3, 4]], u)
+    lo = _lip_curve(pu[[0, 7, 6, 5, 4]], pv[[0, 7, 6, 5, 4]], u)
+    h = np.maximum(lo - up, 1e-6)
+    return u, (v - up) / h, h, w
+
+
+def mouth_colours(u, s, h, w, teeth: bool = True, tongue: bool = True) -> np.ndarray:
+    """(..., 3) float32 RGB of the painted interior at mouth coordinates (:func:`mouth_coordinates`)."""
+    taper = np.sqrt(np.clip(1.0 - (2.0 * u - 1.0) ** 2, 0.0, 1.0))
+    depth = 1.0 - np.abs(2.0 * np.clip(s, 0.0, 1.0) - 1.0)            # 0 at the lips, 1 in the middle
+    edge, back = np.float32(CAVITY_EDGE_RGB), np.float32(CAVITY_BACK_RGB)
+    col = edge + (back - edge) * np.sqrt(depth)[..., None].astype(np.float32)
+    dist_up, dist_lo = s * h, (1.0 - s) * h                          # pixels from each lip
+    for on, share, width, rgb, dist in ((tongue, TONGUE_SHARE, TONGUE_WIDTH, TONGUE_RGB, dist_lo),
+                                        (teeth, TEETH_SHARE, TEETH_WIDTH, TEETH_RGB, dist_up)):
+        if not on:
+            continue
+        band = np.minimum(share * h, width * w) * taper
+        a = np.clip(band - dist + 0.5, 0.0, 1.0)[..., None].astype(np.float32)   # 1 px ramp
+        col = col * (1 - a) + np.float32(rgb) * a
+    return col
+
+
+def paint_mouth(image, inner_lip, opacity: float = 1.0, teeth: bool = True, tongue: bool = True) -> None:
+    """Paint the open mouth inside the polygon ``inner_lip`` (8, 2) (iBUG 60-67) of ``image`` (H, W),
+    (H, W, 1), (H, W, 3) or (H, W, 4) uint8 in place, blended with ``opacity`` (anti-aliased edge;
+    a grey image gets the luma, an alpha channel is made opaque). Nothing is drawn for a polygon of
+    area at most :data:`.mouth2d.MIN_OPEN_AREA` px^2 or an opacity below 1/255; only pixels under
+    the polygon's anti-aliased edge change."""
+    import cv2
+
+    from .mouth2d import MIN_OPEN_AREA, polygon_area
+
+    P = np.asarray(inner_lip, np.float64)
+    if polygon_area(P) <= MIN_OPEN_AREA or opacity * 255.0 < 1.0:
+        return
+    if image.ndim == 2:
+        image = image[..., None]                     # a view: writes go to the caller's array
+    H, W = image.shape[:2]
+    x0, y0 = np.maximum(np.floor(P.min(0)).astype(int) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(P.max(0)).astype(int) + 2, [W, H])
+    if x1 <= x0 or y1 <= y0:
+        return
+    shift = 4  # sub-pixel vertices (1/16 px)
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.fillPoly(mask, np.round((P - [x0, y0]) * (1 << shift)).astype(np.int32)[None], 255, lineType=cv2.LINE_AA,
+                 shift=shift)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    u, s, h, w = mouth_coordinates(P, xx, yy)
+    rgb = mouth_colours(u, s, h, w, teeth, tongue)
+    a = (mask.astype(np.float32) * (float(opacity) / 255.0))[..., None]
+    C = image.shape[2]
+    if C == 4:
+        col = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.float32)], -1)
+    elif C == 3:
+        col = rgb
+    else:
+        col = (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
+    box = image[y0:y1, x0:x1].astype(np.float32)
+    image[y0:y1, x0:x1] = np.clip(np.rint(box * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
+
+
+__all__ = ["TEETH_RGB", "CAVITY_EDGE_RGB", "CAVITY_BACK_RGB", "TONGUE_RGB", "mouth_coordinates", "mouth_colours",
+           "paint_mouth"]

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut, opening_opacity
-from .mouthpaint import paint_mouth
+from .mouthpaint import image_chroma, paint_mouth
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
 
@@ -252,6 +252,7 @@ class CartoonAnimator:
         # the mouth (:mod:`.mouth2d`): a cut mesh gets its inner-lip triangles back for drawing only,
         # and with 68 landmarks the opening is drawn as a dark interior
         self.draws_mouth = L == 68
+        self.mouth_chroma = image_chroma(self.image, self.rest[48:68]) if self.draws_mouth else 1.0
         self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces
         self.fold_free = bool(fold_free)
         self.solver = None
@@ -348,7 +349,7 @@ class CartoonAnimator:
         out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
         if self.draws_mouth:
             mouth = V[INNER_LIP_68]
-            paint_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]))
+            paint_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]), chroma=self.mouth_chroma)
         return out
 
     def frame_at(self, drive: CartoonDrive, t: int) -> np.ndarray:

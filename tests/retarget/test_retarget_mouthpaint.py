@@ -83,3 +83,33 @@ def test_opacity_blends_and_grey_and_alpha_images_are_painted_in_place():
     rgba = np.zeros((60, 60, 4), np.uint8)
     paint_mouth(rgba, MOUTH)
     assert np.array_equal(rgba[30, 30, :3], rgb[30, 30]) and rgba[30, 30, 3] == 255
+
+
+def test_a_grey_photograph_stored_as_rgb_gets_a_grey_mouth_and_a_coloured_one_its_colours():
+    from facebasis.retarget.mouthpaint import image_chroma
+
+    grey = np.full((60, 60, 3), 120, np.uint8)
+    skin = np.zeros((60, 60, 3), np.uint8)
+    skin[:] = (225, 180, 160)
+    assert image_chroma(grey, MOUTH) == 0.0 and image_chroma(skin, MOUTH) == 1.0
+    assert image_chroma(grey[..., 0], MOUTH) == 0.0
+    for img in (grey, skin):
+        out = img.copy()
+        paint_mouth(out, MOUTH, chroma=image_chroma(img, MOUTH))
+        changed = np.any(out != img, axis=-1)
+        spread = out[changed].max(-1).astype(int) - out[changed].min(-1)
+        assert (spread.max() <= 1) if img is grey else (spread.max() > 50)
+    # the driven warp: the cameraman-like grey target is painted grey
+    from facebasis.defaults.cartoon import default_cartoon
+    from scipy.spatial import Delaunay
+
+    from facebasis.retarget.warp2d import CartoonAnimator
+
+    face = default_cartoon()
+    lm = np.array(face.landmarks, float)
+    g = np.repeat(np.round(face.image @ [0.299, 0.587, 0.114]).astype(np.uint8)[..., None], 3, axis=2)
+    anim = CartoonAnimator(g, lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
+    V = lm.copy()
+    V[np.r_[65:68, 55:60, 6:11], 1] += 40.0
+    out = anim.frame(V)
+    assert anim.mouth_chroma == 0.0 and int((out.max(-1).astype(int) - out.min(-1)).max()) <= 1

@@ -88,3 +88,30 @@ def test_still_noise_is_the_spread_over_sub_pixel_shifts():
     assert np.array_equal(sd, still_noise(img, _Reader(), features, n=12, seed=0))   # seeded
     blank = np.full((40, 40, 3), 255, np.uint8)
     assert np.isnan(still_noise(blank, _Reader(), features, n=5)).all()         # no face found
+
+
+def test_target_images_landmarks_the_photographs_with_the_landmarker_and_keeps_the_cartoons_own():
+    """The photographs get the landmarker's points (facebasis landmarks' default detector), not the
+    reading detector's; the built-in cartoons keep their drawn landmarks."""
+    pytest.importorskip("skimage")
+    from problems.bench_cartoon import target_images
+
+    class Fixed:
+        def __init__(self, offset):
+            self.offset, self.calls = offset, 0
+
+        def detect(self, image):
+            self.calls += 1
+            h, w = image.shape[:2]
+            return np.full((68, 2), [w / 2 + self.offset, h / 2])
+
+    reader, landmarker = Fixed(0.0), Fixed(7.0)
+    images = dict((n, (img, lm)) for n, img, lm in target_images(reader, landmarker))
+    assert reader.calls == 0 and landmarker.calls == 4           # two photographs and their paintings
+    for name in ("astronaut", "astronaut-painted", "cameraman", "cameraman-painted"):
+        img, lm = images[name]
+        np.testing.assert_allclose(lm[0], [img.shape[1] / 2 + 7.0, img.shape[0] / 2])
+    from facebasis.defaults.cartoon import default_cartoon
+
+    np.testing.assert_array_equal(images["cartoon"][1], default_cartoon().landmarks)
+    assert len(target_images(reader)) == len(images) and reader.calls == 4    # default: the reader itself

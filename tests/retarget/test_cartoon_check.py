@@ -90,28 +90,35 @@ def test_still_noise_is_the_spread_over_sub_pixel_shifts():
     assert np.isnan(still_noise(blank, _Reader(), features, n=5)).all()         # no face found
 
 
-def test_target_images_landmarks_the_photographs_with_the_landmarker_and_keeps_the_cartoons_own():
-    """The photographs get the landmarker's points (facebasis landmarks' default detector), not the
-    reading detector's; the built-in cartoons keep their drawn landmarks."""
+def test_photographs_take_the_second_detectors_landmarks_only_where_the_first_is_off_the_mouth():
+    """target_images: the photographs keep the first detector's landmarks (the captures' convention) unless
+    the second puts the mouth more than DISAGREE_IOD eye distances away; the built-in cartoons keep
+    their drawn landmarks and no detector is asked about them."""
     pytest.importorskip("skimage")
-    from problems.bench_cartoon import target_images
+    from facebasis.defaults.cartoon import cartoon_landmarks, default_cartoon
+    from problems.bench_cartoon import DISAGREE_IOD, photo_landmarks, target_images
 
     class Fixed:
-        def __init__(self, offset):
-            self.offset, self.calls = offset, 0
+        def __init__(self, shift):
+            self.shift, self.calls = shift, 0
 
         def detect(self, image):
             self.calls += 1
-            h, w = image.shape[:2]
-            return np.full((68, 2), [w / 2 + self.offset, h / 2])
+            lm = cartoon_landmarks() * image.shape[0] / 512.0
+            lm[48:68, 1] += self.shift * np.linalg.norm(lm[45] - lm[36])   # the mouth moved by shift iod
+            return lm
 
-    reader, landmarker = Fixed(0.0), Fixed(7.0)
-    images = dict((n, (img, lm)) for n, img, lm in target_images(reader, landmarker))
-    assert reader.calls == 0 and landmarker.calls == 4           # two photographs and their paintings
+    image = np.zeros((512, 512, 3), np.uint8)
+    near, far = Fixed(0.5 * DISAGREE_IOD), Fixed(2 * DISAGREE_IOD)
+    first = Fixed(0.0)
+    np.testing.assert_array_equal(photo_landmarks(image, first, near), first.detect(image))
+    np.testing.assert_array_equal(photo_landmarks(image, first, far), far.detect(image))
+    np.testing.assert_array_equal(photo_landmarks(image, first), first.detect(image))
+
+    reader, second = Fixed(0.0), Fixed(2 * DISAGREE_IOD)
+    images = dict((n, (img, lm)) for n, img, lm in target_images(reader, second))
+    assert reader.calls == 4 and second.calls == 4                # two photographs and their paintings
     for name in ("astronaut", "astronaut-painted", "cameraman", "cameraman-painted"):
         img, lm = images[name]
-        np.testing.assert_allclose(lm[0], [img.shape[1] / 2 + 7.0, img.shape[0] / 2])
-    from facebasis.defaults.cartoon import default_cartoon
-
+        np.testing.assert_allclose(lm, second.detect(img))
     np.testing.assert_array_equal(images["cartoon"][1], default_cartoon().landmarks)
-    assert len(target_images(reader)) == len(images) and reader.calls == 4    # default: the reader itself

@@ -377,7 +377,7 @@ RECIPES: tuple[Recipe, ...] = (
            ("reproduction/cartoon_expression.csv", "reproduction/cartoon_expression.md"),
            CAPTURES + TRACKED + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
                                  "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --modes uniform,still "
-                                 "--images cartoon,cartoon-closed,cartoon-wide,astronaut,astronaut-painted,cameraman "
+                                 "--images cartoon,cartoon-closed,astronaut,astronaut-painted,cameraman "
                                  "--readers dlib,mediapipe --check-every 10 --mp-every 2 --warp-every 20 "
                                  "--out {tmp}/expression",
                        "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",

@@ -112,40 +112,18 @@ def paint_mouth(image, inner_lip, opacity: float = 1.0, teeth: bool = True, tong
     (0: their luma; the warp passes :func:`image_chroma` of the target). Nothing is drawn for a polygon of
     area at most :data:`.mouth2d.MIN_OPEN_AREA` px^2 or an opacity below 1/255; only pixels under
     the polygon's anti-aliased edge change."""
-    import cv2
-
-    from .mouth2d import MIN_OPEN_AREA, polygon_area
+    from .mouth2d import blend_polygon
 
     P = np.asarray(inner_lip, np.float64)
-    if polygon_area(P) <= MIN_OPEN_AREA or opacity * 255.0 < 1.0:
-        return
-    if image.ndim == 2:
-        image = image[..., None]                     # a view: writes go to the caller's array
-    H, W = image.shape[:2]
-    x0, y0 = np.maximum(np.floor(P.min(0)).astype(int) - 1, 0)
-    x1, y1 = np.minimum(np.ceil(P.max(0)).astype(int) + 2, [W, H])
-    if x1 <= x0 or y1 <= y0:
-        return
-    shift = 4  # sub-pixel vertices (1/16 px)
-    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    cv2.fillPoly(mask, np.round((P - [x0, y0]) * (1 << shift)).astype(np.int32)[None], 255, lineType=cv2.LINE_AA,
-                 shift=shift)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    u, s, h, w = mouth_coordinates(P, xx, yy)
-    rgb = mouth_colours(u, s, h, w, teeth, tongue)
-    if chroma < 1.0:                                 # towards the colours' luma: a grey photograph's grey mouth
-        luma = (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
-        rgb = luma + np.float32(max(chroma, 0.0)) * (rgb - luma)
-    a = (mask.astype(np.float32) * (float(opacity) / 255.0))[..., None]
-    C = image.shape[2]
-    if C == 4:
-        col = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.float32)], -1)
-    elif C == 3:
-        col = rgb
-    else:
-        col = (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
-    box = image[y0:y1, x0:x1].astype(np.float32)
-    image[y0:y1, x0:x1] = np.clip(np.rint(box * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
+
+    def colours(xx, yy):
+        rgb = mouth_colours(*mouth_coordinates(P, xx, yy), teeth, tongue)
+        if chroma < 1.0:                             # towards the colours' luma: a grey photograph's grey mouth
+            luma = (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
+            rgb = luma + np.float32(max(chroma, 0.0)) * (rgb - luma)
+        return rgb
+
+    blend_polygon(image, P, colours, opacity)
 
 
 __all__ = ["TEETH_RGB", "CAVITY_EDGE_RGB", "CAVITY_BACK_RGB", "TONGUE_RGB", "CHROMA_FULL", "image_chroma",

@@ -32,7 +32,7 @@ import argparse
 
 import numpy as np
 
-from problems.bench_cartoon import FEATURES, correlation, features, target_images
+from problems.bench_cartoon import FEATURES, correlation, default_landmarker, features, target_images
 
 #: the ramps' ends, in eye-corner distances
 MOUTH_DROP, CORNER_OUT, BROW_RISE = 0.25, 0.06, 0.06
@@ -108,7 +108,7 @@ def main(argv=None):
     det = DlibDetector()
     readers = {r: (det if r == "dlib" else make_reader(r)) for r in args.readers.split(",")}
     rows = []
-    for name, img, lm in target_images(det):
+    for name, img, lm in target_images(det, default_landmarker()):
         for r, reader in readers.items():
             noise = still_noise(img, reader, features, args.noise_draws)
             for row in readback(name, img, lm, reader, args.steps, args.amplitude, r, noise):

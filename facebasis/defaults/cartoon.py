@@ -16,6 +16,15 @@ import numpy as np
 
 #: the layout is designed on a 512 x 512 canvas and scaled to the requested size
 _BASE = 512.0
+#: the brows (layout pixels): thickness at the inner end, its loss towards the outer end, the part above the
+#: landmarks, colour; and the upper teeth's band under the upper inner lip. Chosen on dlib and MediaPipe
+#: reading the face back (problems/cartoon_readback.py's ramps, still noise over 12 sub-pixel shifts): an 8 px
+#: line through the brow landmarks gave dlib's brow reading r 0.25, gain 0.23, still noise 0.040 eye distances;
+#: this body r 0.99, gain 1.08, noise 0.014 (16 px: noise 0.002 but MediaPipe's gain 0.45, 14 px above the
+#: landmarks: dlib's eye reading r 0.68). Without teeth dlib's still noise on the mouth opening was 0.033, with
+#: them 0.015 (gain 1.21 -> 1.02).
+BROW_THICK, BROW_TAPER, BROW_ABOVE, BROW_RGB = 12.0, 0.5, 1.0, (70, 42, 30)
+MOUTH_TEETH = 6.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +69,28 @@ def _open_curve(points: np.ndarray, n: int = 100) -> np.ndarray:
 
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     return CubicSpline(s, points)(np.linspace(0.0, s[-1], n))
+
+
+def _draw_mouth(img, lm, pts, poly, line) -> None:
+    """The mouth, in place on the supersampled canvas: lips through the outer contour, the opening through
+    the inner one (dark, the upper teeth as a light band under the upper inner lip, clipped to the opening,
+    the tongue over the lower lip), the lips' outline."""
+    import cv2
+
+    poly(_closed_curve(lm[48:60], 200), (214, 96, 102))
+    inner = lm[60:68]
+    poly(_closed_curve(inner, 160), (70, 20, 28))
+    layer = img.copy()
+    edge = inner[[0, 1, 2, 3, 4]]
+    lower = edge + np.array([0.0, 1.0, 1.0, 1.0, 0.0])[:, None] * [0.0, MOUTH_TEETH]
+    cv2.fillPoly(layer, [pts(np.concatenate([_open_curve(edge, 80), _open_curve(lower, 80)[::-1]]))],
+                 (236, 232, 222), cv2.LINE_AA, 4)
+    mask = np.zeros(img.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [pts(_closed_curve(inner, 160))], 255, cv2.LINE_AA, 4)
+    a = (mask.astype(np.float32) / 255.0)[..., None]
+    img[:] = (img * (1 - a) + layer * a).astype(np.uint8)
+    poly(_closed_curve(np.array([[236, 377], [256, 372], [276, 377], [256, 383]]), 60), (232, 120, 130))
+    line(_closed_curve(lm[48:60], 200), (150, 56, 62), 1.6, closed=True)
 
 
 def _draw(size: int) -> np.ndarray:
@@ -135,20 +166,18 @@ def _draw(size: int) -> np.ndarray:
                             np.concatenate([e[0:1], e[1:3], e[3:4]]), 60)
         line(upper, (40, 28, 24), 3.2)
         line(_open_curve(np.concatenate([e[3:4], e[4:6], e[0:1]]), 60), outline, 1.4)
-    # brows
-    for b in (lm[17:22], lm[22:27]):
-        line(_open_curve(b, 60), hair, 8.0)
+    # brows: the landmarks on the upper edge (as iBUG annotates them), the body below, thick at the inner end
+    for b, inner_first in ((lm[17:22], False), (lm[22:27], True)):
+        top = _open_curve(b, 60)
+        s = np.linspace(0.0, 1.0, len(top))
+        thick = BROW_THICK * (1.0 - BROW_TAPER * (s if inner_first else 1.0 - s))
+        bottom = top + np.c_[np.zeros_like(s), thick]
+        poly(np.concatenate([top - [0, BROW_ABOVE], bottom[::-1]]), BROW_RGB)
     # nose: bridge shade and nostril arc
     line(_open_curve(lm[[28, 29, 30]] + [4, 0], 40), skin_dark, 2.5)
     line(_open_curve(lm[31:36], 60), outline, 2.6)
     ellipse(lm[30] + [0, 6], (11, 5), (236, 186, 156))
-    # mouth: lips through the outer contour, the opening through the inner one
-    poly(_closed_curve(lm[48:60], 200), (214, 96, 102))
-    inner = lm[60:68]
-    poly(_closed_curve(inner, 160), (120, 32, 40))
-    tongue = _closed_curve(np.array([[236, 377], [256, 372], [276, 377], [256, 383]]), 60)
-    poly(tongue, (232, 120, 130))
-    line(_closed_curve(lm[48:60], 200), (150, 56, 62), 1.6, closed=True)
+    _draw_mouth(img, lm, pts, poly, line)
     out = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
     return out
 

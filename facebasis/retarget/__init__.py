@@ -15,7 +15,8 @@ Modules
 rbf        eq. 10-13: multiquadric RBF correspondence, mean-edge-length scale
 warp2d     a cartoon image animated by the capture (:class:`CartoonAnimator`)
 raster2d   the vectorised piecewise-affine image warp (scanline rasteriser, ``cv2.remap``)
-mouth2d    the mouth of the cartoon warp: an open mouth drawn as a dark interior, for cut and uncut meshes
+mouth2d    the mouth of the cartoon warp: how open it is drawn (opacity), the inner-lip strip of a cut mesh
+mouthpaint an open mouth painted as a mouth: upper teeth, a cavity darkest at the back, the tongue
 foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
 featurescale eq. 12 per feature: each eye and the mouth moved in the target's own proportions

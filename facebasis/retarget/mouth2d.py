@@ -8,9 +8,10 @@ reads as an opening. A
 capture mesh cut open along closed lips (:func:`mouth_is_cut`) has no triangle there at all, and the
 target's still pixels showed through the gap.
 
-:func:`fill_mouth` therefore draws the opening, the inner-lip polygon (iBUG 60-67) of the frame, as
-a dark mouth interior as it opens beyond the target's own mouth, whether the capture mesh is cut or
-not, with the opacity :func:`opening_opacity` ``clip(A_t / A_rest - 1, 0, 1)`` (``A`` the polygon's
+The warp therefore draws the opening, the inner-lip polygon (iBUG 60-67) of the frame, as a mouth
+interior as it opens beyond the target's own mouth, whether the capture mesh is cut or not: painted
+with teeth, cavity and tongue (:func:`.mouthpaint.paint_mouth`; :func:`fill_mouth`, one flat dark colour,
+is the former drawing and the baseline it was measured against), with the opacity :func:`opening_opacity` ``clip(A_t / A_rest - 1, 0, 1)`` (``A`` the polygon's
 area over the squared mouth width, ``A_rest`` the target's own, at least a quarter pixel): the target at rest is left exactly as it
 is drawn (a capture that does not move leaves the cartoon unchanged), a closed-mouth painting driven
 open shows a dark opening as large as the opening (its ``A_rest`` is about 0, so any opening is
@@ -75,14 +76,16 @@ def opening_opacity(mouth, rest_mouth) -> float:
     return float(np.clip(a / max(a_rest, MIN_OPEN_AREA / w2_rest) - 1.0, 0.0, 1.0))
 
 
-def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0) -> None:
-    """Blend the polygon ``inner_lip`` (8, 2) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4)
-    uint8 in place towards ``colour`` (RGB; its luma on a grey image, opaque alpha) with ``opacity``
-    (anti-aliased edge), when the polygon is open (area above :data:`MIN_OPEN_AREA`) and the opacity
-    above 1/255. Only the polygon's bounding box is touched."""
+def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
+    """Blend the polygon (k, 2) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8 in place
+    towards ``colours`` with ``opacity`` (anti-aliased edge, cv2's sub-pixel fill), when the polygon is
+    open (area above :data:`MIN_OPEN_AREA`) and the opacity above 1/255; a grey image gets the
+    colours' luma, an alpha channel is made opaque. ``colours``: an RGB triple, or a function of the
+    pixel coordinates ``(xx, yy)`` (h, w) of the polygon's bounding box giving (h, w, 3) float32 RGB.
+    Only the bounding box is touched."""
     import cv2
 
-    P = np.asarray(inner_lip, np.float64)
+    P = np.asarray(polygon, np.float64)
     if polygon_area(P) <= MIN_OPEN_AREA or opacity * 255.0 < 1.0:
         return
     if image.ndim == 2:
@@ -97,12 +100,24 @@ def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0
     cv2.fillPoly(mask, np.round((P - [x0, y0]) * (1 << shift)).astype(np.int32)[None], 255, lineType=cv2.LINE_AA,
                  shift=shift)
     a = (mask.astype(np.float32) * (float(opacity) / 255.0))[..., None]
-    rgb = np.asarray(tuple(colour)[:3], np.float32)
-    col = np.r_[rgb, np.float32(255)] if image.shape[2] == 4 else rgb if image.shape[2] == 3 else \
-        np.float32([rgb @ np.float32([0.299, 0.587, 0.114])])
+    if callable(colours):
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        rgb = np.asarray(colours(xx, yy), np.float32)
+    else:
+        rgb = np.broadcast_to(np.asarray(tuple(colours)[:3], np.float32), mask.shape + (3,))
+    C = image.shape[2]
+    col = np.concatenate([rgb, np.full(mask.shape + (1,), 255, np.float32)], -1) if C == 4 else rgb if C == 3 \
+        else (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
     box = image[y0:y1, x0:x1].astype(np.float32)
     image[y0:y1, x0:x1] = np.clip(np.rint(box * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
 
 
+def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0) -> None:
+    """Blend the polygon ``inner_lip`` (8, 2) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4)
+    uint8 in place towards one ``colour`` (RGB; its luma on a grey image, opaque alpha) with ``opacity``
+    (:func:`blend_polygon`)."""
+    blend_polygon(image, inner_lip, colour, opacity)
+
+
 __all__ = ["INNER_LIP_68", "MOUTH_INTERIOR_RGB", "MOUTH_STRIP_68", "MIN_OPEN_AREA", "mouth_is_cut", "polygon_area",
-           "opening_opacity", "fill_mouth"]
+           "opening_opacity", "blend_polygon", "fill_mouth"]

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut, opening_opacity
+from .mouthpaint import image_chroma, paint_mouth
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
 
@@ -251,6 +252,7 @@ class CartoonAnimator:
         # the mouth (:mod:`.mouth2d`): a cut mesh gets its inner-lip triangles back for drawing only,
         # and with 68 landmarks the opening is drawn as a dark interior
         self.draws_mouth = L == 68
+        self.mouth_chroma = image_chroma(self.image, self.rest[48:68]) if self.draws_mouth else 1.0
         self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces
         self.fold_free = bool(fold_free)
         self.solver = None
@@ -337,8 +339,9 @@ class CartoonAnimator:
         """The cartoon warped so that ``rest`` moves to ``cartoon_vertices`` (N, 2); (H, W, C) uint8.
 
         With 68 landmarks the mouth opening (inner-lip polygon, iBUG 60-67), as it opens beyond the
-        target's own mouth, is drawn as a dark mouth interior (:func:`.mouth2d.fill_mouth` with
-        :func:`.mouth2d.opening_opacity`: a closed-mouth painting driven open shows a dark opening, not
+        target's own mouth, is painted as a mouth interior (:func:`.mouthpaint.paint_mouth`: upper teeth,
+        a cavity darkest in the middle, the tongue, with :func:`.mouth2d.opening_opacity`: a closed-mouth
+        painting driven open shows an open mouth, not
         stretched lips; the target at rest is left as it is drawn); a capture mesh cut
         open along closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
         (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap."""
@@ -346,7 +349,7 @@ class CartoonAnimator:
         out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
         if self.draws_mouth:
             mouth = V[INNER_LIP_68]
-            fill_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]))
+            paint_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]), chroma=self.mouth_chroma)
         return out
 
     def frame_at(self, drive: CartoonDrive, t: int) -> np.ndarray:

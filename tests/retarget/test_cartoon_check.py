@@ -88,3 +88,37 @@ def test_still_noise_is_the_spread_over_sub_pixel_shifts():
     assert np.array_equal(sd, still_noise(img, _Reader(), features, n=12, seed=0))   # seeded
     blank = np.full((40, 40, 3), 255, np.uint8)
     assert np.isnan(still_noise(blank, _Reader(), features, n=5)).all()         # no face found
+
+
+def test_photographs_take_the_second_detectors_landmarks_only_where_the_first_is_off_the_mouth():
+    """target_images: the photographs keep the first detector's landmarks (the captures' convention) unless
+    the second puts the mouth more than DISAGREE_IOD eye distances away; the built-in cartoons keep
+    their drawn landmarks and no detector is asked about them."""
+    pytest.importorskip("skimage")
+    from facebasis.defaults.cartoon import cartoon_landmarks, default_cartoon
+    from problems.bench_cartoon import DISAGREE_IOD, photo_landmarks, target_images
+
+    class Fixed:
+        def __init__(self, shift):
+            self.shift, self.calls = shift, 0
+
+        def detect(self, image):
+            self.calls += 1
+            lm = cartoon_landmarks() * image.shape[0] / 512.0
+            lm[48:68, 1] += self.shift * np.linalg.norm(lm[45] - lm[36])   # the mouth moved by shift iod
+            return lm
+
+    image = np.zeros((512, 512, 3), np.uint8)
+    near, far = Fixed(0.5 * DISAGREE_IOD), Fixed(2 * DISAGREE_IOD)
+    first = Fixed(0.0)
+    np.testing.assert_array_equal(photo_landmarks(image, first, near), first.detect(image))
+    np.testing.assert_array_equal(photo_landmarks(image, first, far), far.detect(image))
+    np.testing.assert_array_equal(photo_landmarks(image, first), first.detect(image))
+
+    reader, second = Fixed(0.0), Fixed(2 * DISAGREE_IOD)
+    images = dict((n, (img, lm)) for n, img, lm in target_images(reader, second))
+    assert reader.calls == 4 and second.calls == 4                # two photographs and their paintings
+    for name in ("astronaut", "astronaut-painted", "cameraman", "cameraman-painted"):
+        img, lm = images[name]
+        np.testing.assert_allclose(lm, second.detect(img))
+    np.testing.assert_array_equal(images["cartoon"][1], default_cartoon().landmarks)

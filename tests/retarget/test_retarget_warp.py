@@ -106,7 +106,8 @@ def test_a_mouth_cut_open_along_closed_lips_is_drawn_as_an_opening_not_as_the_re
     lips seen through the gap."""
     from facebasis.capture.facemesh import build_face_mesh
     from facebasis.defaults.cartoon import default_cartoon
-    from facebasis.retarget.warp2d import MOUTH_INTERIOR_RGB, CartoonAnimator, mouth_is_cut
+    from facebasis.retarget.mouthpaint import CAVITY_BACK_RGB
+    from facebasis.retarget.warp2d import CartoonAnimator, mouth_is_cut
 
     face = default_cartoon()
     lm = np.array(face.landmarks, float)
@@ -120,6 +121,6 @@ def test_a_mouth_cut_open_along_closed_lips_is_drawn_as_an_opening_not_as_the_re
     opened[[65, 66, 67]] += [0.0, 12.0]                  # the mouth opens by 12 px
     frame = anim.frame(opened)
     centre = np.round(anim.mesh(opened)[[62, 66]].mean(0)).astype(int)
-    assert np.abs(frame[centre[1], centre[0], :3].astype(int) - MOUTH_INTERIOR_RGB).max() <= 2
+    assert np.abs(frame[centre[1], centre[0], :3].astype(int) - CAVITY_BACK_RGB).max() <= 2   # the back of the mouth
     rest = anim.frame(mesh.vertices)                      # closed: nothing is filled
     np.testing.assert_array_equal(rest, anim.warp(anim.mesh(mesh.vertices)))

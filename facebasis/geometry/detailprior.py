@@ -111,6 +111,11 @@ INDUCING_CELL = 0.6
 #: kernel matrix between them is dense, 128 MB at 4000)
 MAX_INDUCING = 4000
 #: the field's bases (:class:`DetailPriorOptions`.basis)
+#: ``amplitude`` ``"auto"`` with the fixed coefficient prior (``noise_prior`` False, the previous pipeline) is the previous
+#: rule with this amplitude: the evidence's noise level sets eq. D2's prior, which the fixed prior does not take (it is
+#: stronger than the noise on purpose, to find the basin from the template), and the evidence's ``s`` at a noise level
+#: it does not fit was worse there (the tests' default-face person with a field: median 0.0329 vs 0.0203 cm)
+AUTO_FIXED_PRIOR = 2.0
 BASES = ("kernel", "spectral")
 
 
@@ -144,9 +149,9 @@ class DetailPriorOptions:
     length : the field's correlation length ``l``, as a fraction of the fitted part's bounding-box
         diagonal (0.04: 1.9 cm on ICT's head, the scale of a cheek or a brow)
     amplitude : ``"auto"`` (the default): ``s``, and the noise level of eq. D2's prior, maximise the evidence of
-        the joint model linearised at the modes-only fit (:mod:`.detailevidence`, eq. E1); a number: ``s`` is this
-        times the RMS of the normal offsets that a modes-only fit leaves (2: the previous default), eq. D2 at that
-        fit's residual
+        the joint model linearised at the modes-only fit (:mod:`.detailevidence`, eq. E1); with ``noise_prior``
+        False, :data:`AUTO_FIXED_PRIOR`. A number: ``s`` is this times the RMS of the normal offsets that a
+        modes-only fit leaves (2: the previous default), eq. D2 at that fit's residual
     noise_prior : the joint fit continues from the modes-only fit (the fixed prior
         ``ModelFitOptions.prior``, which finds the basin from the template) with the priors at the noise
         level of that fit's residual (eq. D2, :func:`noise_prior`). False: the fixed prior, the joint fit
@@ -354,7 +359,7 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         return plain
     fo = reg.options.identity_fit                 # the fixed prior: the joint fit from the template as it was
     part = slice(None) if reg.skin is None else reg.skin
-    auto = isinstance(opts.amplitude, str)
+    auto = isinstance(opts.amplitude, str) and opts.noise_prior     # "auto" with the fixed prior: AUTO_FIXED_PRIOR
     if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves; continued.
         # The joint fit pairs about as large a share of its candidate vertices as the modes-only fit did
         n = len(P) if reg.skin is None else len(reg.skin)       # the part's vertices, without copying them
@@ -366,13 +371,13 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
     D, choice = reg.identity.deltas, None
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
-        choice, fo = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h,
-                                      fo, opts.noise_prior)
+        choice, fo = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo)
         s = choice.sd
     else:
         out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
                                   reg.options.normal_stage, use=reg.skin)
-        s = opts.amplitude * offset_rms(out.offset, out.no_surface)
+        amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
+        s = amplitude * offset_rms(out.offset, out.no_surface)
     fit = fit_with_detail(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, s, fo,
                           start=plain if opts.noise_prior else None)
     if choice is not None:
@@ -385,23 +390,19 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
 
 
 def _evidence_choice(plain: ModelFit, prior: DetailPrior, base: np.ndarray, deltas: np.ndarray, surface, normals_of,
-                     h: float, fo: ModelFitOptions, noise: bool):
-    """``(EvidenceChoice, the joint fit's options)``: ``s`` (and with ``noise``, the noise level ``sigma_n``)
-    maximising eq. E1 of :mod:`.detailevidence` at the modes-only fit ``plain`` (the field at zero), paired as the
-    joint fit with options ``fo`` pairs. With ``noise`` the joint fit's ``mu`` is eq. D2 at ``sigma_n`` over those
-    pairs (within the bounds of :func:`noise_prior`); without, ``sigma_n`` is the one the fixed ``mu`` stands for
-    (eq. D2 read backwards) and ``fo`` is returned unchanged."""
+                     h: float, fo: ModelFitOptions):
+    """``(EvidenceChoice, the joint fit's options)``: ``s`` and the noise level ``sigma_n`` maximising eq. E1 of
+    :mod:`.detailevidence` at the modes-only fit ``plain`` (the field at zero), paired as the joint fit with options
+    ``fo`` pairs; the joint fit's ``mu`` is eq. D2 at ``sigma_n`` over those pairs (within the bounds of
+    :func:`noise_prior`)."""
     from .detailevidence import choose_by_evidence, normal_equations
 
     basis = ModesAndField(deltas, prior.phi, prior.normals)
     c = np.concatenate([plain.coefficients, np.zeros(len(prior.phi))])
     H, g, yy, p, npose = normal_equations(base, basis, c, plain.pose, surface, normals_of, h, fo)
-    sigma_n = plain.rms if noise else float(np.sqrt(fo.prior * max(p, 1)) * h)
-    choice = choose_by_evidence(H, g, yy, p, npose, prior.scales, h, sigma_n, fit_noise=noise)
-    if noise:
-        mu = choice.noise ** 2 / (max(p, 1) * h ** 2)
-        fo = dataclasses.replace(fo, prior=float(np.clip(mu, NOISE_PRIOR_FLOOR * fo.prior, fo.prior)))
-    return choice, fo
+    choice = choose_by_evidence(H, g, yy, p, npose, prior.scales, h, plain.rms)
+    mu = choice.noise ** 2 / (max(p, 1) * h ** 2)
+    return choice, dataclasses.replace(fo, prior=float(np.clip(mu, NOISE_PRIOR_FLOOR * fo.prior, fo.prior)))
 
 
 def detail_report(fit: ModelFit) -> dict:
@@ -415,6 +416,6 @@ def detail_report(fit: ModelFit) -> dict:
                              "noise_template_units": float(fit.detail_noise) if fit.detail_noise > 0 else None}}
 
 
-__all__ = ["BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
+__all__ = ["AUTO_FIXED_PRIOR", "BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
            "fit_with_detail", "identity_fit_with_detail",
            "noise_prior", "offset_rms"]

@@ -320,11 +320,17 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig-round7", "The rig bench with issue #27's seventh-round identity fit (the detail field's "
            "deviation and the noise level chosen per neutral scan by the evidence of the linearised joint model, eq. "
            "E1 of geometry/detailevidence.py), both persons, seeds 0, 1, 2 and 3; baseline: registration-rig-round6 "
-           "(the same command with --detail-amplitude 2)",
-           tuple(f"registration/round7_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           "(the same command with --detail-amplitude 2) and round7_amp2_seed{1,3}: persons with detail, amplitude 2, the "
+           "same code",
+           tuple(f"registration/{d}/{f}" for d in ("round7_seed0", "round7_seed1", "round7_seed2", "round7_seed3",
+                                                   "round7_amp2_seed1", "round7_amp2_seed3")
+                 for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail in-space --train 12 "
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
-                 f"--out reports/registration/round7_seed{s}" for s in (0, 1, 2, 3)),
+                 f"--out reports/registration/round7_seed{s}" for s in (0, 1, 2, 3))
+           + tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail --train 12 "
+                   f"--no-baseline --fit-modes 100 --after-model normal --regions 48 --detail-amplitude 2 "
+                   f"--out reports/registration/round7_amp2_seed{s}" for s in (1, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",

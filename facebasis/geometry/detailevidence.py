@@ -31,7 +31,7 @@ evidence): persons with detail outside the space 0.0266 / 0.0218 / 0.0225 / 0.03
 0.0203 / 0.0283 / 0.0240 (``s`` 0.074 / 0.041 / 0.096 / 0.104 / 0.092 -> 0.044 / 0.026 / 0.030 / 0.040 / 0.038 cm);
 persons within it 0.0115 / 0.0133 / 0.0138 / 0.0175 / 0.0150 -> 0.0086 / 0.0109 / 0.0091 / 0.0108 / 0.0110 (``s``
 ~0.018 -> ~0.002: the evidence finds no detail). ``sigma_n`` came out 0.019-0.023 cm on every scan, the scans' 0.2
-mm noise. Cost: one pairing round and ~50 evaluations, 0.2-0.3 s CPU, and no normal-stage pass for the offsets.
+mm noise. Cost: one pairing round and 30-60 evaluations, 0.2-0.4 s CPU, and no normal-stage pass for the offsets.
 
 References
 ----------

@@ -58,7 +58,7 @@ def test_the_evidence_is_maximised_near_the_true_amplitude_and_noise(s_true):
     (H, g, yy, p, npose), scales = _drawn(s_true, 0.01)
     h = 0.1
     c = choose_by_evidence(H, g, yy, p, npose, scales, h, noise=0.05)
-    # measured: s 0.0199 / 0.0985 for 0.02 / 0.1 (~120 functions drawn), noise 0.0100 / 0.0100
+    # measured: s 0.0188 / 0.0946 for 0.02 / 0.1 (120 functions drawn), noise 0.0099 / 0.0099
     assert c.sd == pytest.approx(s_true, rel=0.2) and c.noise == pytest.approx(0.01, rel=0.1)
     assert c.pairs == p and c.evaluations > 10
     lo, hi = (log_evidence(H, g, yy, p, c.noise ** -2, np.r_[0.0, 0.0, 1 / (k * c.sd * scales) ** 2]) for k in (0.5, 2))
@@ -68,11 +68,12 @@ def test_the_evidence_is_maximised_near_the_true_amplitude_and_noise(s_true):
     assert fixed.noise == 0.01 and fixed.sd == pytest.approx(s_true, rel=0.2)
 
 
-def test_no_field_gives_a_deviation_near_the_lower_bound():
+def test_no_field_gives_a_deviation_far_below_the_noise():
     from facebasis.geometry.detailevidence import BOUNDS
 
     (H, g, yy, p, npose), scales = _drawn(0.0, 0.01)
     c = choose_by_evidence(H, g, yy, p, npose, scales, 0.1, noise=0.05)
+    # measured: s 0.00065 (a field drawn at 0.02: 0.0188), noise 0.0099
     assert c.sd < 0.1 * 0.01 and c.sd >= BOUNDS[0] * 0.1 * (1 - 1e-9) and c.noise == pytest.approx(0.01, rel=0.1)
 
 

@@ -183,7 +183,7 @@ def choose_by_evidence(H: np.ndarray, g: np.ndarray, yy: float, p: int, npose: i
     z0 = np.array([grid[int(np.argmin([neg([z, np.log(noise)], False) for z in grid]))]]
                   + ([np.log(noise)] if fit_noise else []))
     # relative to the start: eq. E1 is ~1e4 on a scan, and L-BFGS-B's relative tolerance then stops on the plateau
-    # where the field is off (a person within the space: d/d log s ~0.05 there, the maximum 20x higher in s)
+    # where the field is off (a person within the space: d/d log s ~0.1 at the lower bound, the maximum 7x higher)
     f0 = neg(z0, False)
     res = minimize(lambda z: (lambda v, d: (v - f0, d))(*neg(z)), z0, jac=True, method="L-BFGS-B",
                    bounds=[(lo, hi)] * len(z0), options=dict(ftol=1e-12, gtol=1e-7, maxiter=200))

@@ -111,12 +111,12 @@ INDUCING_CELL = 0.6
 #: kernel matrix between them is dense, 128 MB at 4000)
 MAX_INDUCING = 4000
 #: the field's bases (:class:`DetailPriorOptions`.basis)
+BASES = ("kernel", "spectral")
 #: ``amplitude`` ``"auto"`` with the fixed coefficient prior (``noise_prior`` False, the previous pipeline) is the previous
 #: rule with this amplitude: the evidence's noise level sets eq. D2's prior, which the fixed prior does not take (it is
-#: stronger than the noise on purpose, to find the basin from the template), and the evidence's ``s`` at a noise level
-#: it does not fit was worse there (the tests' default-face person with a field: median 0.0329 vs 0.0203 cm)
+#: stronger than the noise on purpose, to find the basin from the template), and the evidence's ``s`` beside the fixed
+#: prior was worse (the tests' default-face person with a field: median 0.0329 vs 0.0203 cm)
 AUTO_FIXED_PRIOR = 2.0
-BASES = ("kernel", "spectral")
 
 
 def noise_prior(fit: ModelFit, h: float, ceiling: float, pairs: float | None = None) -> float:

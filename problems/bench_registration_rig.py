@@ -59,6 +59,9 @@ SINGLES = ("jawOpen", "mouthSmile_L", "mouthPucker")
 PARTS = ("jaw", "brows", "nose", "eyes", "lips_out", "lips_in")  #: ICT's 68 landmarks' groups, in order
 DETAIL_MODES = 300  #: RegistrationOptions' default detail prior (geometry/detailprior.py); 0: the modes-only fit
 DETAIL_BASIS = "kernel"  #: its default basis (eq. D3 there; "spectral": eq. D1, the earlier tables' with 150 modes)
+#: its default amplitude: "auto", chosen per scan by the evidence (geometry/detailevidence.py, eq. E1); a number: s = it x
+#: the modes-only fit's RMS normal offset (2: the tables before the seventh round)
+DETAIL_AMPLITUDE = "auto"
 
 
 def detail_field(V: np.ndarray, normals: np.ndarray, face: np.ndarray, rng, amplitude: float = 0.25,
@@ -140,7 +143,8 @@ def heldout_scanned(rig, pp, pairs, vertices: np.ndarray) -> float:
 def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after_model: str = "nricp",
                regions: int = 0, attribution: bool = False,
                detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True,
-               detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None) -> tuple[dict, list]:
+               detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None,
+               detail_amplitude: float | str = DETAIL_AMPLITUDE) -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -163,13 +167,14 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
             "" if noise_prior or not detail_modes else ", fixed prior") + (
             "" if unseen or not detail_modes else ", unseen as fitted") + (
             "" if detail_basis == DETAIL_BASIS or not detail_modes else f", {detail_basis} basis") + (
-            "" if detail_fit is None or not detail_modes else f", joint fit {detail_fit[0]} samples {detail_fit[1]} rounds")
+            "" if detail_fit is None or not detail_modes else f", joint fit {detail_fit[0]} samples {detail_fit[1]} rounds") + (
+            "" if detail_amplitude == DETAIL_AMPLITUDE or not detail_modes else f", amplitude {detail_amplitude:g}")
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
     opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions),
                                detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior,
-                                                         unseen=unseen, basis=detail_basis,
+                                                         unseen=unseen, basis=detail_basis, amplitude=detail_amplitude,
                                                          **({} if detail_fit is None else dict(
                                                              fit_samples=detail_fit[0], fit_iterations=detail_fit[1]))))
     reg = Registration(T, F, opts, name="ICT neutral", identity=ident, expressions=expr)
@@ -190,6 +195,8 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
         med, p95, mx = _stats(e)
         rows.append({"seed": seed, "person": kind, "method": method, "scan": nm, "err_median": med, "err_p95": p95,
                      "err_max": mx, "seconds": sec, "cpu_seconds": cpu, "load": os.getloadavg()[0]})
+        if res.model_kind == "identity":  # the detail field's deviation s and the noise level (eq. E1: chosen per scan)
+            rows[-1].update(detail_sd=res.model.detail_sd, detail_noise=res.model.detail_noise)
         # into the neutral's frame by the head's pose: the rigid stage's, refined by the model fit's
         pose = res.similarity if res.model is None else res.model.pose.then(res.similarity)
         out.append(res.vertices if nm == "neutral" else pose.inverse().apply(res.vertices))
@@ -289,6 +296,19 @@ def write_markdown(out: Path, argv=None) -> None:
     (out / "rig.md").write_text("\n".join(lines))
 
 
+def _amplitude(text: str):
+    """``--detail-amplitude``'s value: ``"auto"`` or a positive number."""
+    if text == "auto":
+        return text
+    try:
+        a = float(text)
+    except ValueError:
+        a = float("nan")
+    if not (np.isfinite(a) and a > 0):
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a positive number, found {text!r}")
+    return a
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
@@ -319,6 +339,10 @@ def main(argv=None):
                     help="DetailPriorOptions.unseen (the neutral's vertices without scan surface: the modes plus the "
                          "seen detail's extension, eq. U1 of geometry/unseen.py; off: as the fit and the normal stage "
                          "left them); one method per value")
+    ap.add_argument("--detail-amplitude", type=_amplitude, default=DETAIL_AMPLITUDE, metavar="auto|A",
+                    help="DetailPriorOptions.amplitude: 'auto' (default; the field's deviation and the noise level "
+                         "chosen per scan by the evidence, eq. E1 of geometry/detailevidence.py) or a positive number "
+                         "(s = A x the modes-only fit's RMS normal offset; 2: the tables before the seventh round)")
     ap.add_argument("--out", default="reports/registration")
     ap.add_argument("--table-only", action="store_true", help="only rewrite rig.md from the CSV files")
     args = ap.parse_args(argv)
@@ -340,7 +364,7 @@ def main(argv=None):
             for k, a, r, m, n, u, b in methods:
                 row, rows = run_method(pp, k, seed, kind, after_model=a, regions=r, attribution=args.attribution,
                                        detail_modes=m, noise_prior=n, unseen=u, detail_basis=b,
-                                       detail_fit=args.detail_fit)
+                                       detail_fit=args.detail_fit, detail_amplitude=args.detail_amplitude)
                 summary.append(row)
                 scans += rows
                 _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept

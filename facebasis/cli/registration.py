@@ -30,6 +30,9 @@ def cmd_register(args) -> int:
     if args.detail_basis is not None and args.detail_prior == "off":
         raise InputError(f"--detail-basis {args.detail_basis}: expected together with --detail-prior on (the detail "
                          "field's basis), found --detail-prior off")
+    if args.detail_amplitude is not None and args.detail_prior == "off":
+        raise InputError(f"--detail-amplitude {args.detail_amplitude}: expected together with --detail-prior on (the "
+                         "detail field's deviation), found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 
@@ -44,12 +47,26 @@ def cmd_register(args) -> int:
                                detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes
                                                          if args.detail_modes is None else args.detail_modes,
                                                          noise_prior=args.identity_prior != "fixed",
-                                                         basis=args.detail_basis or DetailPriorOptions.basis))
+                                                         basis=args.detail_basis or DetailPriorOptions.basis,
+                                                         amplitude=_amplitude(args.detail_amplitude)))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
     print(f"registered {len(s['scans'])} scan(s) in the template's topology -> {args.out}")
     return 0
+
+
+def _amplitude(text):
+    """``--detail-amplitude``'s value for :class:`DetailPriorOptions` (which checks it): the library's default,
+    ``"auto"``, or a number (anything else is passed on as text and refused there in one line)."""
+    from ..geometry.detailprior import DetailPriorOptions
+
+    if text is None or text == "auto":
+        return DetailPriorOptions.amplitude if text is None else text
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def register(subparsers) -> None:
@@ -96,6 +113,11 @@ def register(subparsers) -> None:
                         "eigenfunctions (the previous field, with --detail-modes 150; the joint fit still pairs every skin vertex "
                         "for 20 rounds, the former fit paired 5000 for 40; 150 hold 82%% of the variance on average, "
                         "300 cost 10 s)")
+    p.add_argument("--detail-amplitude", default=None, action=Once, metavar="auto|A",
+                   help="the detail field's pointwise deviation: 'auto' (default) chooses it per neutral scan, with "
+                        "the scan's noise level, by the evidence (marginal likelihood) of the joint fit linearised at "
+                        "the modes-only fit (a person within the identity space gets almost no field); a positive number "
+                        "A: A x the RMS normal offset the modes-only fit leaves (2: the previous default)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -112,6 +112,11 @@ INDUCING_CELL = 0.6
 MAX_INDUCING = 4000
 #: the field's bases (:class:`DetailPriorOptions`.basis)
 BASES = ("kernel", "spectral")
+#: ``amplitude`` ``"auto"`` with the fixed coefficient prior (``noise_prior`` False, the previous pipeline) is the previous
+#: rule with this amplitude: the evidence's noise level sets eq. D2's prior, which the fixed prior does not take (it is
+#: stronger than the noise on purpose, to find the basin from the template), and the evidence's ``s`` beside the fixed
+#: prior was worse (the tests' default-face person with a field: median 0.0329 vs 0.0203 cm)
+AUTO_FIXED_PRIOR = 2.0
 
 
 def noise_prior(fit: ModelFit, h: float, ceiling: float, pairs: float | None = None) -> float:
@@ -143,7 +148,10 @@ class DetailPriorOptions:
         default); ``"spectral"``: the first Laplace-Beltrami eigenfunctions (eq. D1, the previous pipeline)
     length : the field's correlation length ``l``, as a fraction of the fitted part's bounding-box
         diagonal (0.04: 1.9 cm on ICT's head, the scale of a cheek or a brow)
-    amplitude : ``s`` is this times the RMS of the normal offsets that a modes-only fit leaves
+    amplitude : ``"auto"`` (the default): ``s``, and the noise level of eq. D2's prior, maximise the evidence of
+        the joint model linearised at the modes-only fit (:mod:`.detailevidence`, eq. E1); with ``noise_prior``
+        False, :data:`AUTO_FIXED_PRIOR`. A number: ``s`` is this times the RMS of the normal offsets that a
+        modes-only fit leaves (2: the previous default), eq. D2 at that fit's residual
     noise_prior : the joint fit continues from the modes-only fit (the fixed prior
         ``ModelFitOptions.prior``, which finds the basin from the template) with the priors at the noise
         level of that fit's residual (eq. D2, :func:`noise_prior`). False: the fixed prior, the joint fit
@@ -166,7 +174,7 @@ class DetailPriorOptions:
 
     modes: int = 300
     length: float = 0.04
-    amplitude: float = 2.0
+    amplitude: float | str = "auto"
     noise_prior: bool = True
     unseen: bool = True
     unseen_samples: int = 2000
@@ -177,10 +185,13 @@ class DetailPriorOptions:
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
             raise parameter_error("detail_modes", "an integer >= 0", repr(self.modes), label="detail.modes")
-        for k in ("length", "amplitude"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
-                raise InputError(f"detail.{k}: expected a positive number, found {v!r}")
+        v = self.length
+        if not (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
+            raise InputError(f"detail.length: expected a positive number, found {v!r}")
+        a = self.amplitude
+        if not (isinstance(a, str) and a == "auto") and not (isinstance(a, (int, float, np.integer, np.floating))
+                                                             and not isinstance(a, bool) and np.isfinite(a) and a > 0):
+            raise parameter_error("detail_amplitude", "'auto' or a positive number", repr(a), label="detail.amplitude")
         for k in ("noise_prior", "unseen"):
             if not isinstance(getattr(self, k), (bool, np.bool_)):
                 raise InputError(f"detail.{k}: expected True or False, found {getattr(self, k)!r}")
@@ -348,27 +359,63 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         return plain
     fo = reg.options.identity_fit                 # the fixed prior: the joint fit from the template as it was
     part = slice(None) if reg.skin is None else reg.skin
+    auto = isinstance(opts.amplitude, str) and opts.noise_prior     # "auto" with the fixed prior: AUTO_FIXED_PRIOR
     if opts.noise_prior:  # eq. D2: the coefficients' prior weighed against the residual the fit leaves; continued.
         # The joint fit pairs about as large a share of its candidate vertices as the modes-only fit did
         n = len(P) if reg.skin is None else len(reg.skin)       # the part's vertices, without copying them
         pairs = plain.pairs * min(opts.fit_samples, n) / min(fo.samples, n)
-        fo = dataclasses.replace(fo, samples=opts.fit_samples, prior=noise_prior(plain, h, fo.prior, pairs),
-                                 prior_start=None, iterations=opts.fit_iterations)
-    out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
-                              reg.options.normal_stage, use=reg.skin)
+        fo = dataclasses.replace(fo, samples=opts.fit_samples, prior_start=None, iterations=opts.fit_iterations,
+                                 prior=fo.prior if auto else noise_prior(plain, h, fo.prior, pairs))
     icp = reg.nricp if reg.skin is None else reg._skin_icp
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
-    D = reg.identity.deltas
-    fit = fit_with_detail(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h,
-                          opts.amplitude * offset_rms(out.offset, out.no_surface), fo,
+    D, choice = reg.identity.deltas, None
+    if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
+        choice, fo = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo)
+        s = choice.sd
+    else:
+        out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
+                                  reg.options.normal_stage, use=reg.skin)
+        amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
+        s = amplitude * offset_rms(out.offset, out.no_surface)
+    fit = fit_with_detail(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, s, fo,
                           start=plain if opts.noise_prior else None)
+    if choice is not None:
+        fit = dataclasses.replace(fit, detail_noise=choice.noise)
     if reg.skin is None or fit is plain:
         return fit
     X = fit.pose.apply(P + (fit.coefficients @ D.reshape(len(D), -1)).reshape(P.shape))
     X[reg.skin] = fit.vertices
-    return ModelFit(X, fit.coefficients, fit.pose, fit.rms, fit.pairs, fit.iterations, fit.detail_sd)
+    return dataclasses.replace(fit, vertices=X)
 
 
-__all__ = ["BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "fit_with_detail", "identity_fit_with_detail",
+def _evidence_choice(plain: ModelFit, prior: DetailPrior, base: np.ndarray, deltas: np.ndarray, surface, normals_of,
+                     h: float, fo: ModelFitOptions):
+    """``(EvidenceChoice, the joint fit's options)``: ``s`` and the noise level ``sigma_n`` maximising eq. E1 of
+    :mod:`.detailevidence` at the modes-only fit ``plain`` (the field at zero), paired as the joint fit with options
+    ``fo`` pairs; the joint fit's ``mu`` is eq. D2 at ``sigma_n`` over those pairs (within the bounds of
+    :func:`noise_prior`)."""
+    from .detailevidence import choose_by_evidence, normal_equations
+
+    basis = ModesAndField(deltas, prior.phi, prior.normals)
+    c = np.concatenate([plain.coefficients, np.zeros(len(prior.phi))])
+    H, g, yy, p, npose = normal_equations(base, basis, c, plain.pose, surface, normals_of, h, fo)
+    choice = choose_by_evidence(H, g, yy, p, npose, prior.scales, h, plain.rms)
+    mu = choice.noise ** 2 / (max(p, 1) * h ** 2)
+    return choice, dataclasses.replace(fo, prior=float(np.clip(mu, NOISE_PRIOR_FLOOR * fo.prior, fo.prior)))
+
+
+def detail_report(fit: ModelFit) -> dict:
+    """The detail field's part of a registration's report: ``{"detail_field": {...}}`` with its deviation ``s``
+    and, when the evidence chose it (:mod:`.detailevidence`), the noise level chosen with it; ``{}`` without a
+    field."""
+    if not fit.detail_sd > 0:
+        return {}
+    return {"detail_field": {"sd_template_units": float(fit.detail_sd),
+                             "chosen_by": "evidence" if fit.detail_noise > 0 else "amplitude",
+                             "noise_template_units": float(fit.detail_noise) if fit.detail_noise > 0 else None}}
+
+
+__all__ = ["AUTO_FIXED_PRIOR", "BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
+           "fit_with_detail", "identity_fit_with_detail",
            "noise_prior", "offset_rms"]

@@ -239,7 +239,11 @@ def _model_line(rep: dict) -> str:
         if kind in rep:
             m = rep[kind]
             top = sorted(m["coefficients"].items(), key=lambda kv: -abs(kv[1]))[:3]
+            d = m.get("detail_field")
             return (f"; {kind} fit: {len(m['coefficients'])} {'modes' if kind == 'identity' else 'weights > 0'}, "
                     f"rms {m['rms_point_to_plane_template_units']:.3g}, largest "
-                    + ", ".join(f"{k} {v:.2f}" for k, v in top))
+                    + ", ".join(f"{k} {v:.2f}" for k, v in top)
+                    + ("" if d is None else f"; detail field sd {d['sd_template_units']:.3g} ("
+                       + (f"auto: evidence, noise {d['noise_template_units']:.3g})" if d["noise_template_units"]
+                          else "from the amplitude)")))
     return ""

@@ -38,7 +38,7 @@ from ..errors import InputError, MeshError
 from .expressionregions import RegionOptions, expression_fit
 from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
-from .detailprior import DetailPriorOptions, identity_fit_with_detail
+from .detailprior import DetailPriorOptions, detail_report, identity_fit_with_detail
 from .normalstage import NormalStageOptions, normal_displacement
 from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
@@ -160,7 +160,7 @@ class RegistrationResult:
         if self.model_kind == "expressions":
             c = {k: v for k, v in c.items() if v > 1e-4}
         return {"coefficients": c, "rms_point_to_plane_template_units": float(m.rms), "pairs": int(m.pairs),
-                "iterations": int(m.iterations)}
+                "iterations": int(m.iterations), **detail_report(m)}
 
 
 def _bbox_diagonal(V: np.ndarray) -> float:

@@ -171,6 +171,8 @@ class ModelFit:
     iterations : rounds run
     detail_sd : the pointwise deviation ``s`` of the detail field fitted beside the modes (eq. D1 of
         :mod:`.detailprior`; 0: none)
+    detail_noise : the residuals' deviation ``sigma_n`` chosen with ``s`` by the evidence (eq. E1 of
+        :mod:`.detailevidence`; 0: ``s`` was not chosen so)
     """
 
     vertices: np.ndarray
@@ -180,6 +182,7 @@ class ModelFit:
     pairs: int
     iterations: int
     detail_sd: float = 0.0
+    detail_noise: float = 0.0
 
 
 def _pairs(X, normals, surface, dmax, cos_max, use, floor):

@@ -103,8 +103,8 @@ def test_detail_outside_the_space_no_longer_slides_the_fitted_correspondence():
     T, F, basis, c, S, G, truth = _person_with_detail()
     out = {}
     for m, noise in ((0, False), (60, False), (60, True)):
-        res = Registration(T, F, RegistrationOptions(after_model="normal",
-                                                     detail=DetailPriorOptions(modes=m, noise_prior=noise)),
+        res = Registration(T, F, RegistrationOptions(after_model="normal",   # the amplitude these were measured at
+                                                     detail=DetailPriorOptions(modes=m, noise_prior=noise, amplitude=2.0)),
                            identity=basis).register(S, G)
         err = np.linalg.norm(res.vertices - truth, axis=1)
         out[m, noise] = np.abs(res.model.coefficients - c).max(), np.median(err), np.percentile(err, 95)
@@ -117,7 +117,10 @@ def test_detail_outside_the_space_no_longer_slides_the_fitted_correspondence():
     assert fixed[1] < 0.9 * plain[1] and fixed[2] < 0.8 * plain[2]
     # continued with the noise-level prior (eq. D2): the points closer still (measured 0.022 / 0.060 cm); the
     # modes and the field trade more freely (both are smooth normal displacements), so the coefficients
-    # alone are not the measure here
+    # alone are not the measure here. (With the amplitude chosen by the evidence, the default now, this noise-free
+    # scan's sigma_n 0.009 cm makes eq. D2's prior 9x weaker than the modes-only fit's residual does, and the modes
+    # and the field trade more still: median 0.012, p95 0.060 cm, coefficients 0.58; tests/geometry/
+    # test_detailevidence.py measures the choice itself)
     assert noise[1] < 0.9 * fixed[1] and noise[2] < 0.85 * fixed[2]
 
 
@@ -187,7 +190,7 @@ def test_several_parts_follow_the_fit_with_the_detail_prior():
     ({"modes": 2.5}, r"detail\.modes: expected an integer >= 0, found 2.5"),
     ({"modes": True}, r"detail\.modes: expected an integer >= 0, found True"),
     ({"length": 0.0}, r"detail\.length: expected a positive number, found 0.0"),
-    ({"amplitude": float("nan")}, r"detail\.amplitude: expected a positive number, found nan"),
+    ({"amplitude": float("nan")}, r"detail\.amplitude: expected 'auto' or a positive number, found nan"),
     ({"noise_prior": "yes"}, r"detail\.noise_prior: expected True or False, found 'yes'"),
     ({"noise_prior": 1}, r"detail\.noise_prior: expected True or False, found 1"),
     ({"basis": "eigen"}, r"detail\.basis: expected one of kernel, spectral, found 'eigen'"),
@@ -309,7 +312,8 @@ def test_the_joint_fit_gets_its_samples_rounds_and_pair_count(monkeypatch, noise
     """The joint fit's data (fit_samples, fit_iterations) and eq. D2's pair count reach fit_shape_model when
     it continues from the modes-only fit; with the fixed prior it is the joint fit from the template as it
     was (the modes-only fit's samples, rounds and prior). The modes-only fit samples 1000 of the face's 4497
-    vertices, the joint fit 3000, so eq. D2 counts the plain fit's pairs times 3000 / 1000."""
+    vertices, the joint fit 3000, so eq. D2 counts the plain fit's pairs times 3000 / 1000. (A fixed amplitude:
+    with ``"auto"`` eq. D2 takes the evidence's noise level and pairs, tests/geometry/test_detailevidence.py.)"""
     from facebasis.geometry import detailprior
     from facebasis.geometry.shapemodel import ModelFitOptions
 
@@ -329,7 +333,7 @@ def test_the_joint_fit_gets_its_samples_rounds_and_pair_count(monkeypatch, noise
     monkeypatch.setattr(detailprior, "fit_shape_model", spy)
     monkeypatch.setattr(detailprior, "noise_prior", prior_spy)
     fit_opts = ModelFitOptions(samples=1000)
-    opts = RegistrationOptions(identity_fit=fit_opts, detail=DetailPriorOptions(modes=40, noise_prior=noise,
+    opts = RegistrationOptions(identity_fit=fit_opts, detail=DetailPriorOptions(modes=40, noise_prior=noise, amplitude=2.0,
                                                                                 fit_samples=3000, fit_iterations=7))
     Registration(T, F, opts, identity=basis).register(S, G)
     assert len(seen) == 1

@@ -6,7 +6,8 @@
 
 For every capture folder (``facebasis capture`` output) and every target image (the built-in
 cartoon, the same with its lips closed, the same cartoon stretched 1.3x wide, scikit-image's astronaut photograph and a painted
-(``cv2.stylization``) version of it, with dlib's landmarks, MediaPipe's where dlib's are off the face: :func:`photo_landmarks`), three ways of driving the cartoon:
+(``cv2.stylization``) version of it, with dlib's landmarks; ``--second-landmarks``: MediaPipe's where dlib's are
+off the mouth, :func:`photo_landmarks`), three ways of driving the cartoon:
 
 * ``paper``: eq. 12 as it is (the head's motion included, no fold handling), the earlier default;
 * ``uniform``: head similarity removed, contacts closed, fold-free warp, one eq. 13 scale for the
@@ -103,7 +104,10 @@ def photo_landmarks(image, detector, second=None):
     more than :data:`DISAGREE_IOD` eye distances away, then ``second``'s. MediaPipe's points on every
     photograph were measured worse: on the astronaut with a dlib capture of cap13 the fold-free solve
     iterated 50 times per frame (3 -> 98 ms per frame, 35 % of frames blended), the two detectors'
-    68-point conventions differing at the mouth corners and the jaw. None if neither finds a face."""
+    68-point conventions differing at the mouth corners and the jaw. None if neither finds a face.
+    Not the benches' default (``--second-landmarks``): with it the turned cameraman's known opening ramp read
+    back at 0.96 by MediaPipe, but the warp of the clips' captures onto it fell back on most frames (cap12
+    tracking only: 1248 of 1337) and the clip check fell (dlib 0.32-0.42 -> 0.16-0.30)."""
     lm = detector.detect(image)
     other = second.detect(image) if second is not None else None
     if lm is None or other is None:
@@ -354,6 +358,10 @@ def main(argv=None):
     ap.add_argument("--noise-draws", type=int, default=12, help="jittered copies of each image for the still noise")
     ap.add_argument("--png", type=int, nargs="*", default=[], help="frames to save side by side (git-ignored)")
     ap.add_argument("--images", default=None, help="comma-separated subset of the target images")
+    ap.add_argument("--second-landmarks", action="store_true",
+                    help="photographs take the default landmarker's points where dlib's are off the mouth "
+                         "(photo_landmarks; measured and not the default: on the turned cameraman the warp of "
+                         "a dlib capture then fell back on most frames)")
     ap.add_argument("--modes", default=",".join(MODES))
     ap.add_argument("--warp-every", type=int, default=1, help="time the warp on every k-th frame only")
     args = ap.parse_args(argv)
@@ -362,7 +370,7 @@ def main(argv=None):
     from problems.cartoon_check import checked_frames, make_reader, still_noise
 
     det = DlibDetector()
-    images = target_images(det, default_landmarker())
+    images = target_images(det, default_landmarker() if args.second_landmarks else None)
     names = [] if args.no_check else args.readers.split(",")
     detectors = {r: (det if r == "dlib" else make_reader(r)) for r in names}
     noise = {im[0]: {r: still_noise(im[1], d, features, args.noise_draws) for r, d in detectors.items()}

@@ -100,6 +100,8 @@ def main(argv=None):
     ap.add_argument("--amplitude", default="feature")
     ap.add_argument("--readers", default="dlib,mediapipe", help="detectors reading the ramps back")
     ap.add_argument("--noise-draws", type=int, default=12)
+    ap.add_argument("--second-landmarks", action="store_true",
+                    help="photographs take the default landmarker's points where dlib's are off the mouth")
     args = ap.parse_args(argv)
     from facebasis.capture.detect import DlibDetector
 
@@ -108,7 +110,7 @@ def main(argv=None):
     det = DlibDetector()
     readers = {r: (det if r == "dlib" else make_reader(r)) for r in args.readers.split(",")}
     rows = []
-    for name, img, lm in target_images(det, default_landmarker()):
+    for name, img, lm in target_images(det, default_landmarker() if args.second_landmarks else None):
         for r, reader in readers.items():
             noise = still_noise(img, reader, features, args.noise_draws)
             for row in readback(name, img, lm, reader, args.steps, args.amplitude, r, noise):

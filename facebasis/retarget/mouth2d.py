@@ -81,8 +81,8 @@ def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
     towards ``colours`` with ``opacity`` (anti-aliased edge, cv2's sub-pixel fill), when the polygon is
     open (area above :data:`MIN_OPEN_AREA`) and the opacity above 1/255; a grey image gets the
     colours' luma, an alpha channel is made opaque. ``colours``: an RGB triple, or a function of the
-    pixel coordinates ``(xx, yy)`` (h, w) of the polygon's bounding box giving (h, w, 3) float32 RGB.
-    Only the bounding box is touched."""
+    pixel coordinates ``(xx, yy)`` (n,) of the pixels the polygon covers giving (n, 3) float32 RGB.
+    Only those pixels are touched."""
     import cv2
 
     P = np.asarray(polygon, np.float64)
@@ -99,17 +99,17 @@ def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
     mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
     cv2.fillPoly(mask, np.round((P - [x0, y0]) * (1 << shift)).astype(np.int32)[None], 255, lineType=cv2.LINE_AA,
                  shift=shift)
-    a = (mask.astype(np.float32) * (float(opacity) / 255.0))[..., None]
+    ys, xs = np.nonzero(mask)                        # only the covered pixels are coloured and blended
+    a = (mask[ys, xs].astype(np.float32) * (float(opacity) / 255.0))[:, None]
     if callable(colours):
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        rgb = np.asarray(colours(xx, yy), np.float32)
+        rgb = np.asarray(colours(xs + x0, ys + y0), np.float32)
     else:
-        rgb = np.broadcast_to(np.asarray(tuple(colours)[:3], np.float32), mask.shape + (3,))
+        rgb = np.broadcast_to(np.asarray(tuple(colours)[:3], np.float32), (len(ys), 3))
     C = image.shape[2]
-    col = np.concatenate([rgb, np.full(mask.shape + (1,), 255, np.float32)], -1) if C == 4 else rgb if C == 3 \
-        else (rgb @ np.float32([0.299, 0.587, 0.114]))[..., None]
-    box = image[y0:y1, x0:x1].astype(np.float32)
-    image[y0:y1, x0:x1] = np.clip(np.rint(box * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
+    col = np.concatenate([rgb, np.full((len(ys), 1), 255, np.float32)], -1) if C == 4 else rgb if C == 3 \
+        else (rgb @ np.float32([0.299, 0.587, 0.114]))[:, None]
+    box = image[y0:y1, x0:x1]                        # a view: writes go to the caller's array
+    box[ys, xs] = np.clip(np.rint(box[ys, xs].astype(np.float32) * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
 
 
 def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0) -> None:

@@ -99,7 +99,8 @@ def mouth_colours(u, s, h, w, teeth: bool = True, tongue: bool = True) -> np.nda
         if not on:
             continue
         band = np.minimum(share * h, width * w) * taper
-        a = np.clip(band - dist + 0.5, 0.0, 1.0)[..., None].astype(np.float32)   # 1 px ramp
+        # 1 px ramp, times the band's own width where it is under a pixel (a nearly closed mouth: no light seam)
+        a = (np.clip(band - dist + 0.5, 0.0, 1.0) * np.clip(band, 0.0, 1.0))[..., None].astype(np.float32)
         col = col * (1 - a) + np.float32(rgb) * a
     return col
 

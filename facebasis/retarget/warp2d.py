@@ -250,7 +250,7 @@ class CartoonAnimator:
             self._smooth = biharmonic_basis(self.warp_rest, self.warp_faces, handles)[L:n, :L]   # (N - L, L)
         self.mouth_cut = mouth_is_cut(self.faces, L)
         # the mouth (:mod:`.mouth2d`): a cut mesh gets its inner-lip triangles back for drawing only,
-        # and with 68 landmarks the opening is drawn as a dark interior
+        # and with 68 landmarks the opening is painted as an open mouth (:mod:`.mouthpaint`)
         self.draws_mouth = L == 68
         self.mouth_chroma = image_chroma(self.image, self.rest[48:68]) if self.draws_mouth else 1.0
         self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces

@@ -71,7 +71,10 @@ def test_a_closed_mouth_face_driven_open_shows_a_dark_opening_proportional_to_it
     assert mouth_is_cut(mesh.faces, 68) == (start_gap == 0.0)
     anim = CartoonAnimator(img, lm, cap, mesh.vertices, mesh.faces, fold_free=False)
     assert polygon_area(anim.rest[INNER_LIP_68]) == pytest.approx(0.0, abs=1e-6)
-    assert _dark_inside(anim, mesh.vertices)[0] == 0          # closed: nothing drawn
+    assert _dark_inside(anim, mesh.vertices)[0] == 0          # closed: nothing drawn ...
+    V = anim.mesh(mesh.vertices)                              # ... the frame is the bare warp, pixel for pixel
+    bare = warp_image(anim.image, anim.warp_rest, np.concatenate([V, anim.ring]), anim.draw_faces)
+    assert np.array_equal(anim.frame(mesh.vertices), bare.reshape(anim.frame(mesh.vertices).shape))
     drops = np.array([4.0, 8.0, 12.0, 16.0, 20.0])
     dark, _, area, perimeter = np.array([_dark_inside(anim, _drop(mesh.vertices, d)) for d in drops]).T
     # the opening is painted, not stretched lips: (nearly) all of the inner-lip polygon, growing with the drop

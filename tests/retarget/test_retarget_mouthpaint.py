@@ -113,3 +113,19 @@ def test_a_grey_photograph_stored_as_rgb_gets_a_grey_mouth_and_a_coloured_one_it
     V[np.r_[65:68, 55:60, 6:11], 1] += 40.0
     out = anim.frame(V)
     assert anim.mouth_chroma == 0.0 and int((out.max(-1).astype(int) - out.min(-1)).max()) <= 1
+
+
+@pytest.mark.parametrize("gap", [0.4, 0.8])
+def test_a_nearly_closed_mouth_is_a_dark_line_not_a_light_seam(gap):
+    """Lips ``gap`` px apart on lip-coloured skin: teeth and tongue bands narrower than a pixel cover only
+    their width, so what the opening changes gets darker than the lips (review: before, both bands took at
+    least half of every such pixel and drew a light line, (184, 156, 148) on lips of (200, 70, 80))."""
+    lips = np.array([200, 70, 80], np.uint8)
+    img = np.broadcast_to(lips, (60, 60, 3)).copy()
+    P = np.array([[10, 30], [20, 30], [30, 30], [40, 30], [50, 30], [40, 30 + gap], [30, 30 + gap], [20, 30 + gap]])
+    out = img.copy()
+    paint_mouth(out, P)
+    changed = np.any(out != img, axis=-1)
+    assert changed.any()
+    luma = np.float64([0.299, 0.587, 0.114])
+    assert (out[changed] @ luma).mean() < 0.9 * (lips @ luma)

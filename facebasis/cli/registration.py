@@ -117,7 +117,9 @@ def register(subparsers) -> None:
                    help="the detail field's pointwise deviation: 'auto' (default) chooses it per neutral scan, with "
                         "the scan's noise level, by the evidence (marginal likelihood) of the joint fit linearised at "
                         "the modes-only fit (a person within the identity space gets almost no field); a positive number "
-                        "A: A x the RMS normal offset the modes-only fit leaves (2: the previous default)")
+                        "A: A x the RMS normal offset the modes-only fit leaves (2: the previous default; also what "
+                        "'auto' uses with --identity-prior fixed, and where the evidence cannot be evaluated: the "
+                        "report's detail_field.chosen_by says which)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -371,9 +371,14 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
     D, choice = reg.identity.deltas, None
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
-        choice, fo = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo)
-        s = choice.sd
-    else:
+        choice, fo_e = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals,
+                                        h, fo)
+        if np.isfinite(choice.log_evidence):
+            s, fo = choice.sd, fo_e
+        else:  # the evidence could not be evaluated (a singular normal matrix): the amplitude rule and eq. D2,
+            choice = None  # reported as chosen by the amplitude (detail_report), never as an evidence choice
+            fo = dataclasses.replace(fo, prior=noise_prior(plain, h, fo.prior, pairs))
+    if choice is None:
         out = normal_displacement(plain.vertices, reg.nricp.vertex_normals(plain.vertices), reg.nricp.L, surface, h,
                                   reg.options.normal_stage, use=reg.skin)
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude

@@ -187,3 +187,18 @@ def test_the_joint_fit_runs_at_the_chosen_deviation_and_noise_level(monkeypatch)
     assert opts.prior == pytest.approx(choice.noise ** 2 / (p * h ** 2))
     assert sigma[12:] == pytest.approx(choice.sd * scales) and np.all(sigma[:12] == 1.0)
     assert res.model.detail_sd == choice.sd and res.model.detail_noise == choice.noise
+
+
+def test_an_evidence_that_cannot_be_evaluated_falls_back_to_the_amplitude_rule_visibly(monkeypatch):
+    """A singular normal matrix makes every evaluation of eq. E1 fail (log evidence -inf): the field's size then
+    comes from the amplitude rule and the report says so (review: it was reported as an evidence choice at the
+    lower bound)."""
+    from facebasis.geometry import detailevidence
+
+    T, F, basis, c, S, G, _ = _face_person(True)
+    monkeypatch.setattr(detailevidence, "choose_by_evidence",
+                        lambda *a, **k: detailevidence.EvidenceChoice(1e-5, 0.05, float("-inf"), 100, 30))
+    res = Registration(T, F, RegistrationOptions(detail=DetailPriorOptions(modes=40)), identity=basis).register(S, G)
+    rep = res.report()["identity"]["detail_field"]
+    assert rep["chosen_by"] == "amplitude" and rep["noise_template_units"] is None
+    assert rep["sd_template_units"] > 1e-3                 # the amplitude rule's size, not the failed choice's

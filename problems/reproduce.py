@@ -262,6 +262,15 @@ RECIPES: tuple[Recipe, ...] = (
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 48 --out reports/registration/round5_seed3",),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-mouth-basin", "Mouth scans (jawOpen at 0.3-1, mouthClose, jawOpen + mouthClose, mouthFunnel, "
+           "mouthPucker, mouthSmile_L) registered through the rig with and without the expression fit's scan-to-model "
+           "pairs (eq. S1 of geometry/scanpairs.py; 0: the previous fit, lips closed over an opened mouth's hole), "
+           "seeds 0-4, both persons",
+           tuple(f"registration/mouth_basin/seed{s}.csv" for s in range(5)) + ("registration/mouth_basin/mouth_basin.md",),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_mouth_basin --seeds {s} --persons detail in-space "
+                 "--scan-pairs 0 5000 --out reports/registration/mouth_basin" for s in range(5))
+           + (f"{PY} problems.bench_mouth_basin --table --out reports/registration/mouth_basin",),
+           data=("ict",), script="problems/bench_mouth_basin.py"),
     Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
            "sockets, holes) set by the modes plus the seen detail's extension in 3D (the default; eq. U1 of "
            "geometry/unseen.py), seeds 0 and 1, persons with detail outside the identity space and in it; baseline: "

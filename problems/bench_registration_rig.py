@@ -144,7 +144,7 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
                regions: int = 0, attribution: bool = False,
                detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True,
                detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None,
-               detail_amplitude: float | str = DETAIL_AMPLITUDE) -> tuple[dict, list]:
+               detail_amplitude: float | str = DETAIL_AMPLITUDE, scan_pairs: int | None = None) -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -172,7 +172,11 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
-    opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions),
+    import dataclasses
+
+    fit = RegistrationOptions().expression_fit
+    fit = fit if scan_pairs is None else dataclasses.replace(fit, scan_pairs=scan_pairs)
+    opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions), expression_fit=fit,
                                detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior,
                                                          unseen=unseen, basis=detail_basis, amplitude=detail_amplitude,
                                                          **({} if detail_fit is None else dict(
@@ -343,6 +347,9 @@ def main(argv=None):
                     help="DetailPriorOptions.amplitude: 'auto' (default; the field's deviation and the noise level "
                          "chosen per scan by the evidence, eq. E1 of geometry/detailevidence.py) or a positive number "
                          "(s = A x the modes-only fit's RMS normal offset; 2: the tables before the seventh round)")
+    ap.add_argument("--expression-scan-pairs", type=int, default=None, metavar="N",
+                    help="the expression fit's scan-to-model pairs (eq. S1 of geometry/scanpairs.py; default the "
+                         "library's, 5000; 0: the tables before the seventh round's mouth-basin fix)")
     ap.add_argument("--out", default="reports/registration")
     ap.add_argument("--table-only", action="store_true", help="only rewrite rig.md from the CSV files")
     args = ap.parse_args(argv)
@@ -364,7 +371,8 @@ def main(argv=None):
             for k, a, r, m, n, u, b in methods:
                 row, rows = run_method(pp, k, seed, kind, after_model=a, regions=r, attribution=args.attribution,
                                        detail_modes=m, noise_prior=n, unseen=u, detail_basis=b,
-                                       detail_fit=args.detail_fit, detail_amplitude=args.detail_amplitude)
+                                       detail_fit=args.detail_fit, detail_amplitude=args.detail_amplitude,
+                                       scan_pairs=args.expression_scan_pairs)
                 summary.append(row)
                 scans += rows
                 _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept

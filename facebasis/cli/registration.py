@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from ..errors import InputError
 from .common import Once, say
 from .outputs import Outputs
@@ -42,6 +44,9 @@ def cmd_register(args) -> int:
     from ..geometry.registration import RegistrationOptions
 
     opts = RegistrationOptions(after_model=args.after_model or "normal",
+                               **({} if args.expression_scan_pairs is None else
+                                  {"expression_fit": dataclasses.replace(RegistrationOptions().expression_fit,
+                                                                         scan_pairs=args.expression_scan_pairs)}),
                                expression_regions=RegionOptions(
                                    count=RegionOptions.count if args.expression_regions is None else args.expression_regions),
                                detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes
@@ -99,6 +104,10 @@ def register(subparsers) -> None:
                    help="after the expression fit, one weight per expression in each of N soft regions placed over "
                         "the expressions' supports (a person's expression whose strength varies over the face, e.g. "
                         "a jaw opening further on one side); default 48; 0: whole expressions only")
+    p.add_argument("--expression-scan-pairs", default=None, type=int, action=Once, metavar="N",
+                   help="the expression fit also pairs N scan vertices with their nearest model vertex (default "
+                        "5000): a model part over a hole of the scan then meets the scan points it should cover "
+                        "(an opened mouth was fitted as lips closed over the mouth hole); 0: model-to-scan pairs only")
     p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
                    help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
                         "what the identity space cannot express is left to that field instead of sliding the "

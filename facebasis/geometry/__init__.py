@@ -25,6 +25,7 @@ nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closes
 registration  scans of any topology to meshes in the template's topology (rigid + model fit + non-rigid ICP)
 registerfiles  registering scan files: inputs checked before any work, outputs written atomically
 shapemodel  identity and expression bases: fitting a scan in a linear shape space (pose + bounded coefficients)
+scanpairs   scan-to-model pairs of the model fits (a model part over a scan's hole, e.g. lips closed over a mouth)
 expressionregions  one expression weight per soft region (a person's expression whose strength varies over the face)
 normalstage  offsets along a fitted model's normals only (after a shape-model fit: a detail stage that cannot slide)
 detailprior  the identity fit with a smooth normal field outside the space (a Gaussian-process prior, manifold harmonics)

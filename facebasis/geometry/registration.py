@@ -65,7 +65,8 @@ class RegistrationOptions:
     unit_ratio : refuse scans whose size differs from the template's by more than this factor
     identity_fit : the identity-space fit of a neutral scan (:mod:`.shapemodel`), when the template
         has an identity basis; ``detail``: its prior on detail outside the space (:mod:`.detailprior`)
-    expression_fit : the expression fit of an expression scan, when expressions are given
+    expression_fit : the expression fit of an expression scan, when expressions are given (``scan_pairs``: with
+        scan-to-model pairs, eq. S1 of :mod:`.scanpairs`: an opened mouth is not fitted as lips closed over its hole)
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
     after_model : the stage after either fit: ``"normal"`` (the default: offsets along the fitted
         model's normals only, :mod:`.normalstage`: cannot slide), ``"nricp"`` (free non-rigid ICP,
@@ -85,7 +86,7 @@ class RegistrationOptions:
     unit_ratio: float = UNIT_RATIO
     identity_fit: ModelFitOptions = field(default_factory=ModelFitOptions)
     expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4,
-                                                                                    prior_start=1e-2))
+                                                                                    prior_start=1e-2, scan_pairs=5000))
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1

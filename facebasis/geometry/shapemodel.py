@@ -40,6 +40,7 @@ import numpy as np
 
 from ..errors import InputError, named_params, parameter_error
 from .rigid import Similarity, _rotation_from_vector
+from .scanpairs import ScanToModel
 
 
 @dataclass(frozen=True)
@@ -144,6 +145,9 @@ class ModelFitOptions:
     prior_start : if set, ``mu`` starts here and falls geometrically to ``prior`` over the first half
         of the iterations (graduated: a strong prior first finds the basin, e.g. an opened jaw rather
         than lips closed over the scan's mouth hole, where no data says otherwise)
+    scan_pairs : also pair this many scan vertices (a seeded sample) with their nearest model vertex
+        (eq. S1 of :mod:`.scanpairs`; 0: model-to-scan pairs only). A model part over a scan's hole has no
+        model-to-scan pair; the scan's points it should cover do
     """
 
     iterations: int = 40
@@ -155,6 +159,13 @@ class ModelFitOptions:
     samples: int = 5000
     seed: int = 0
     prior_start: float | None = None
+    scan_pairs: int = 0
+
+    def __post_init__(self):
+        v = self.scan_pairs
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise parameter_error("expression_scan_pairs", "an integer >= 0 (0: model-to-scan pairs only)", repr(v),
+                                  label="scan_pairs")
 
 
 @dataclass(frozen=True)
@@ -331,6 +342,7 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     check_box(lo, hi)
     c = np.clip(np.zeros(K) if c0 is None else np.asarray(c0, float), lo, hi)
     use = np.arange(n) if use is None else np.asarray(use)
+    back = ScanToModel(surface, use, options, h) if options.scan_pairs else None
     if len(use) > options.samples:  # a seeded sample of the vertices: the fit has few unknowns
         use = np.sort(use[np.random.default_rng(options.seed).choice(len(use), options.samples, replace=False)])
     npose = 7 if options.scale else 6
@@ -339,7 +351,10 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
     rms, kept, it = np.inf, 0, 0
     X = pose.apply(base + basis.combine(c))
     for it in range(1, options.iterations + 1):
-        idx, Q, N = _pairs(X, normals_of(X), surface, options.max_distance * h, cos_max, use, 0.5 * h)
+        nX = normals_of(X)
+        idx, Q, N = _pairs(X, nX, surface, options.max_distance * h, cos_max, use, 0.5 * h)
+        if back is not None:  # eq. S1: the scan's points pull the nearest model vertices too
+            idx, Q, N = (np.concatenate(a) for a in zip((idx, Q, N), back.pairs(X, nX)))
         kept = len(idx)
         if kept < npose + 3:
             break

@@ -223,6 +223,8 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
                 f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
                 f"{rep['iterations']} iterations, {rep['seconds']:.1f} s" + _model_line(rep))
+            if res.rigid_check is not None and res.rigid_check.doubtful:  # never silent (issue #27)
+                log(f"{p.name}: warning: {res.rigid_check.warning()}")
             if auto:
                 le = rep["landmark_error"]
                 log(f"{p.name}: landmarks found on the scan and the template: {rep['landmarks_found']}, used (within "

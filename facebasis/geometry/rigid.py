@@ -322,9 +322,9 @@ def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np
     samples (:func:`trimmed_icp`); the ``refine_candidates`` best of them, pairwise distinct, and
     ``perturbations`` restarts around the best so far, each refined by the one-sided scan-to-template
     ICP (:func:`scan_to_template_icp`) on dense samples; the pose with the lowest scan-to-template
-    residual is kept. The refined poses also give the check: a distinct pose (rotation differing by
-    more than ``options.distinct_degrees``) with a residual within ``options.ambiguous_ratio`` of the
-    best makes the pose ambiguous.
+    residual is kept. The refined candidates also give the check (:func:`.rigidcheck.pose_check`): one
+    ending at a distinct pose (rotation differing by more than ``options.distinct_degrees``) with a
+    residual within ``options.ambiguous_ratio`` of the best makes the pose ambiguous.
     """
     rng = np.random.default_rng(options.seed)
     scan_samples = area_samples(S_V, S_F, 4 * options.samples, rng)
@@ -361,7 +361,7 @@ def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np
         s0 = best.then(Similarity(1.0, P, c - P @ c))
         refined.append(scan_to_template_icp(T_tree, T_dense, T_N, scan_samples, s0, options.refine_iterations,
                                             options.keep_scan, options.scale))
-    return pose_check(refined, T_tree, scan_samples, rt, options)
+    return pose_check(refined, 0 if start is not None else len(starts), T_tree, scan_samples, rt, options)
 
 
 def _rotation_from_vector(w: np.ndarray) -> np.ndarray:

@@ -5,10 +5,11 @@ Two signs of a doubtful pose:
 * **coverage**: the share of the scan's points within ``near`` (a fraction of the template's RMS
   radius, in the scan's units through the found scale) of the placed template. Every point of a scan
   of the template's kind has a counterpart on the template; a wrong pose leaves many without one.
-* **ambiguity**: the search refines several distinct starts; when a pose whose rotation differs from
-  the best by more than ``distinct_degrees`` reaches a scan-to-template residual within
+* **ambiguity**: the search refines several distinct candidates; when one ends at a pose whose rotation
+  differs from the best by more than ``distinct_degrees`` with a scan-to-template residual within
   ``ambiguous_ratio`` of the best, the data do not decide between them (a symmetric shape, a scan
-  showing too little of the face).
+  showing too little of the face). With a known start (landmarks, a registered neutral) there are no
+  candidates and the pose is not called ambiguous.
 """
 
 from __future__ import annotations
@@ -66,12 +67,15 @@ class RigidResult:
         return "rigid pose doubtful: " + "; ".join(why)
 
 
-def pose_check(refined: list, T_tree: cKDTree, scan_pts: np.ndarray, rt: float, options) -> RigidResult:
+def pose_check(refined: list, candidates: int, T_tree: cKDTree, scan_pts: np.ndarray, rt: float, options
+               ) -> RigidResult:
     """The best of the refined poses and its check.
 
     Parameters
     ----------
     refined : (similarity, scan-to-template residual in scan units) of each refined start
+    candidates : the first ``candidates`` of them come from distinct search candidates; only these
+        are runner-ups (the others restart near the best: a flat basin, not a second pose)
     T_tree : tree of template points (template frame)
     scan_pts : (q, 3) scan points
     rt : the template's RMS radius (template units)
@@ -81,7 +85,7 @@ def pose_check(refined: list, T_tree: cKDTree, scan_pts: np.ndarray, rt: float, 
     i = int(np.argmin(res))
     best = refined[i][0]
     ang = np.array([_angle(s.rotation @ best.rotation.T) for s, _ in refined])
-    other = ang > options.distinct_degrees
+    other = (ang > options.distinct_degrees) & (np.arange(len(refined)) < candidates)
     j = int(np.argmin(np.where(other, res, np.inf))) if other.any() else -1
     ratio = float(res[j] / max(res[i], 1e-300)) if j >= 0 else np.inf
     d, _ = T_tree.query(best.inverse().apply(scan_pts))

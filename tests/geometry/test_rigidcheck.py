@@ -79,6 +79,27 @@ def test_the_check_flags_a_scan_unlike_the_template():
     assert "of the scan lies near the template" in res.warning()
 
 
+def test_register_warns_in_one_line_when_the_pose_is_doubtful(tmp_path, capsys):
+    """'facebasis register' of an ellipsoid onto a turned copy: the pose is ambiguous; the CLI says so
+    in one line per scan and the scan's report carries the check."""
+    import json
+
+    from facebasis.cli import main
+    from facebasis.geometry.meshio import write_mesh
+
+    V, F = _ellipsoid(np.array([3.0, 2.0, 1.2]))
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    write_mesh(scans / "neutral.obj", V @ random_rotation(np.random.default_rng(2)).T, F)
+    write_mesh(tmp_path / "template.obj", V, F)
+    code = main(["register", str(scans), "--template", str(tmp_path / "template.obj"), "--out", str(tmp_path / "out")])
+    assert code == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "warning" in ln]
+    assert len(lines) == 1 and lines[0].startswith("neutral.obj: warning: rigid pose doubtful: a pose")
+    chk = json.loads((tmp_path / "out" / "neutral.json").read_text())["rigid"]["check"]
+    assert chk["ambiguous"] and chk["runner_up_ratio"] < 1.1
+
+
 @pytest.mark.parametrize("kw, match", [
     (dict(perturbations=-1), r"rigid\.perturbations: expected an integer >= 0, found -1"),
     (dict(perturb_degrees=120.0), r"rigid\.perturb_degrees: expected a number in \[0, 90\], found 120\.0"),

@@ -104,7 +104,7 @@ class RigidOptions:
     distinct_degrees: float = 10.0
     ambiguous_ratio: float = 1.1
     near: float = 0.05
-    min_near_share: float = 0.6
+    min_near_share: float = 0.5
 
     def __post_init__(self):
         least = {"samples": 10, "candidate_iterations": 0, "refine_candidates": 1, "refine_iterations": 0,

@@ -263,14 +263,15 @@ def scan_to_template_icp(T_tree: cKDTree, T_pts: np.ndarray, T_normals: np.ndarr
         if it == iterations or len(k) < 7:
             break
         X, n = sim.apply(T_pts[j[k]]), T_normals[j[k]] @ sim.rotation.T
-        sim = sim.then(_plane_step(X, S_pts[k], n, scale))
+        sim = sim.then(_plane_step(X, S_pts[k], n, scale)[0])
     return sim, res
 
 
-def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> Similarity:
+def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> tuple[Similarity, np.ndarray]:
     """The similarity step that moves points ``X`` (k, 3) onto the planes through ``Q`` with normals
     ``n``: ``x -> c + (1 + d)(I + [w]x)(x - c) + t`` linearised about the centroid ``c`` of ``X``,
-    the 7 x 7 (6 x 6 without scale) normal equations of ``sum ((x' - q) . n)^2``."""
+    the 7 x 7 (6 x 6 without scale) normal equations of ``sum ((x' - q) . n)^2``; also the step's
+    unknowns ``x`` (w, t[, d])."""
     r0 = ((X - Q) * n).sum(1)
     c = X.mean(0)
     y = X - c
@@ -281,7 +282,7 @@ def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> Sim
     x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(len(H)), -J.T @ r0)
     R = _rotation_from_vector(x[:3])
     s = 1.0 + x[6] if scale else 1.0
-    return Similarity(s, R, c - s * R @ c + x[3:6])
+    return Similarity(s, R, c - s * R @ c + x[3:6]), x
 
 
 def _rotation_angle(R: np.ndarray) -> float:
@@ -330,11 +331,10 @@ def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np
     scan_samples = area_samples(S_V, S_F, 4 * options.samples, rng)
     T_dense, T_N = area_samples(T_V, T_F, 16 * options.samples, rng, normals=True)
     T_tree = cKDTree(T_dense)
-    _, _, rt = principal_frame(T_V, T_F)
+    ct, At, rt = principal_frame(T_V, T_F)
     if start is not None:
         starts = [start]
     else:
-        ct, At, rt = principal_frame(T_V, T_F)
         cs, As, rs = principal_frame(S_V, S_F)
         T_s = area_samples(T_V, T_F, options.samples, rng)
         S_s = scan_samples[: options.samples]
@@ -399,22 +399,13 @@ def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iteration
     for _ in range(iterations):
         X = sim.apply(T_pts)
         Q, N, dist, rim = closest(X)
-        r0 = ((X - Q) * N).sum(1)
         idx = _trimmed(np.where(rim, np.inf, dist), keep)
         idx = idx[~rim[idx]]
         if len(idx) < 7:
             break
-        c = X[idx].mean(0)
-        y, n = X[idx] - c, N[idx]
-        J = np.concatenate([np.cross(y, n), n, (y * n).sum(1, keepdims=True)], 1)  # (k, 7): w, t, d
-        if not scale:
-            J = J[:, :6]
-        rms = float(np.sqrt(np.mean(r0[idx] ** 2))) / sim.scale
-        H = J.T @ J
-        x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(len(H)), -J.T @ r0[idx])
-        R = _rotation_from_vector(x[:3])
-        s = 1.0 + x[6] if scale else 1.0
-        sim = sim.then(Similarity(s, R, c - s * R @ c + x[3:6]))
+        rms = float(np.sqrt(np.mean(((X[idx] - Q[idx]) * N[idx]).sum(1) ** 2))) / sim.scale
+        step, x = _plane_step(X[idx], Q[idx], N[idx], scale)
+        sim = sim.then(step)
         if np.abs(x).max() < tolerance:
             break
     return sim, rms

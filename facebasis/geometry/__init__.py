@@ -21,6 +21,7 @@ transfer    deformation transfer (Sumner & Popovic 2004), factored once for all 
 rig         the :class:`Rig` type, rig folders
 gltf        a rig as glTF 2.0 (.glb/.gltf, metres, normals, UVs, materials) with one morph target per shape
 rigid       similarity alignment of a template to a scan (landmarks, or orientation search + trimmed ICP)
+rigidcheck  the check of a found pose: share of the scan near the template, distinct poses that fit as well
 nricp       non-rigid ICP with a stiffness schedule (Amberg et al. 2007), closest points on a scan
 registration  scans of any topology to meshes in the template's topology (rigid + model fit + non-rigid ICP)
 registerfiles  registering scan files: inputs checked before any work, outputs written atomically

@@ -223,14 +223,21 @@ def register_files(scan_or_dir, template, out, landmarks=None, neutral: str | No
             log(f"{p.name}: residual median {r.get('median', float('nan')):.4g}, p95 {r.get('p95', float('nan')):.4g}, "
                 f"max {r.get('max', float('nan')):.4g}; {rep['no_surface_vertices']} vertices found no scan surface; "
                 f"{rep['iterations']} iterations, {rep['seconds']:.1f} s" + _model_line(rep))
-            if auto:
-                le = rep["landmark_error"]
-                log(f"{p.name}: landmarks found on the scan and the template: {rep['landmarks_found']}, used (within "
-                    f"2 edge lengths of the fitted mesh): {rep['landmarks_used']}"
-                    + (f"; residual after registration mean {le['mean']:.4g}, max {le['max']:.4g}" if le else ""))
+            _log_checks(log, p.name, rep, res.rigid_check, auto)
         copy_side_files(layout, stage)
         atomic_write_json(stage / "summary.json", summary)
     return summary
+
+
+def _log_checks(log, name: str, rep: dict, check, auto: bool) -> None:
+    """A scan's extra lines: a doubtful rigid pose (never silent, issue #27), landmarks found on the scan."""
+    if check is not None and check.doubtful:
+        log(f"{name}: warning: {check.warning()}")
+    if auto:
+        le = rep["landmark_error"]
+        log(f"{name}: landmarks found on the scan and the template: {rep['landmarks_found']}, used (within "
+            f"2 edge lengths of the fitted mesh): {rep['landmarks_used']}"
+            + (f"; residual after registration mean {le['mean']:.4g}, max {le['max']:.4g}" if le else ""))
 
 
 def _model_line(rep: dict) -> str:

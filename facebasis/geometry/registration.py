@@ -4,10 +4,9 @@ Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else
 candidate orientations plus trimmed ICP with scale); with a shape model (:mod:`.shapemodel`) a fit
 in it first: a neutral scan within the template's identity space, an expression scan as the
 person's registered neutral plus the template's expressions transferred to the person (weights
-bounded); then non-rigid ICP with a stiffness schedule
-(:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term: local
-similarities from the template, since two faces differ in local size; local rotations from a
-person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
+bounded); then non-rigid ICP with a stiffness schedule (:mod:`.nricp`; Amberg et al. 2007's optimal-step loop
+with a rotation-aware stiffness term: local similarities from the template, since two faces differ in local size;
+local rotations from a person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
 person, same scanner). The work happens in the start mesh's frame and units; the result is mapped
 back onto the scan. Landmarks may be given (indices or points) or found on the scan
 (``"auto"``, :mod:`.scanlandmarks`).
@@ -15,10 +14,9 @@ back onto the scan. Landmarks may be given (indices or points) or found on the s
 :class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
 landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
 person's expressions, register the neutral scan first, then each expression with
-``start=<registered neutral>``: every expression then starts from the person's own neutral, so a
-vertex index means the same point of the face across the set. :func:`.registerfiles.register_files` does this
-for files (:mod:`.registerfiles`) and writes ``<stem>.obj`` and ``<stem>.json`` (the report) per
-scan, atomically.
+``start=<registered neutral>``: every expression then starts from the person's own neutral, so a vertex index
+means the same point of the face across the set. :func:`.registerfiles.register_files` does this for files and
+writes ``<stem>.obj`` and ``<stem>.json`` (the report) per scan, atomically.
 
 References
 ----------
@@ -40,7 +38,7 @@ from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .detailprior import DetailPriorOptions, detail_report, identity_fit_with_detail
 from .normalstage import NormalStageOptions, normal_displacement
-from .rigid import RigidOptions, Similarity, align_similarity, refine_point_to_plane, umeyama
+from .rigid import RigidOptions, Similarity, refine_point_to_plane, search_similarity, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 from .unseen import extend_unseen
 
@@ -111,7 +109,8 @@ class RegistrationResult:
     distance : (n,) distance of each vertex to the scan surface (scan units)
     no_surface : (n,) bool, vertices that found no usable scan surface (followed the stiffness term)
     iterations : non-rigid ICP iterations over all stiffness levels
-    rigid_score : trimmed symmetric RMS of the rigid stage (template units)
+    rigid_score : trimmed RMS of the rigid stage (template units)
+    rigid_check : the check of the rigid search's pose (:class:`~.rigidcheck.RigidResult`), or None
     landmark_error : (k,) distance of each registered landmark vertex to its scan landmark, or None
     seconds : wall time
     model : the identity or expression fit before the non-rigid stage (None without a basis)
@@ -133,6 +132,7 @@ class RegistrationResult:
     model_kind: str | None = None
     model_names: tuple = ()
     landmarks_found: tuple | None = None
+    rigid_check: object = None
 
     def report(self) -> dict:
         """Summary as plain JSON types (distances in scan units)."""
@@ -150,7 +150,7 @@ class RegistrationResult:
                                                           "landmarks_used": int(self.landmarks_found[1])}),
             "no_surface_vertices": int(self.no_surface.sum()),
             "no_surface_fraction": float(self.no_surface.mean()),
-            "rigid": {**self.similarity.as_dict(), "trimmed_rms_template_units": float(self.rigid_score)},
+            "rigid": {**self.similarity.as_dict(), "trimmed_rms_template_units": float(self.rigid_score), "check": self.rigid_check and self.rigid_check.as_dict()},
             "seconds": float(self.seconds),
             **({} if self.model is None else {self.model_kind: self._model_report()}),
         }
@@ -352,12 +352,12 @@ class Registration:
         guess = umeyama(P[self.landmarks], lm_pts, scale=rigid.scale) if lm_pts is not None else None
         # several parts: the skin aligns (the scan has no eyeballs, teeth: FaceXModel whole landed 6.5 cm off)
         Ps, Fs = (P, self.F) if self.skin is None else (P[self.skin], self._skin_icp.F)
-        sim, score = align_similarity(Ps, Fs, V, F, rigid, start=guess)
+        check = search_similarity(Ps, Fs, V, F, rigid, start=guess)
+        sim, score = check.similarity, check.score
         surface = ScanSurface(V, F)
         with_model = (start is None and self.identity is not None) or expressions is not None
         if not with_model:  # (a model fit refines the pose itself, with the shape)
-            rng = np.random.default_rng(rigid.seed)
-            sub = Ps[rng.choice(len(Ps), min(len(Ps), 4000), replace=False)]
+            sub = Ps[np.random.default_rng(rigid.seed).choice(len(Ps), min(len(Ps), 4000), replace=False)]
             sim, score = refine_point_to_plane(sub, surface.closest, sim, rigid.plane_iterations,
                                                rigid.keep_template, scale=rigid.scale)
         # non-rigid stage: in the rest mesh's frame and units (stiffness and thresholds are unit-free there)
@@ -386,7 +386,7 @@ class Registration:
         lm_err = np.linalg.norm(X[lm_idx] - lm_pts, axis=1) if lm_pts is not None else None
         return RegistrationResult(X, sim, res.distance * sim.scale, res.no_surface, res.iterations, score,
                                   lm_err, time.perf_counter() - t0, model, kind, names,
-                                  (found, len(lm_idx) if lm_idx is not None else 0) if auto else None)
+                                  (found, len(lm_idx) if lm_idx is not None else 0) if auto else None, check)
 
     def _refine(self, P, surface_t, opts, lm_idx, lm_t, h, after_model: bool):
         """The last stage: non-rigid ICP, or after a model fit the stage ``options.after_model``."""

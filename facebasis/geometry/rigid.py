@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import parameter_error
+from .rigidcheck import RigidResult, pose_check
 
 
 @dataclass(frozen=True)
@@ -71,8 +72,8 @@ class RigidOptions:
     samples : points sampled (by area) on each surface for the candidate search
     candidate_iterations : ICP steps per candidate orientation
     refine_candidates : how many of the best candidates are refined further
-    refine_iterations : ICP steps of the refinement (on ``4 samples`` points of each surface, the
-        template's matched to the scan's vertices)
+    refine_iterations : steps of the one-sided scan-to-template ICP that refines each kept start (``4
+        samples`` scan points matched to ``16 samples`` template points)
     keep_template : fraction of template-to-scan pairs kept (the template covers parts a scan lacks)
     keep_scan : fraction of scan-to-template pairs kept (noise, stray parts of the scan)
     seed : seed of the point sampling
@@ -80,29 +81,47 @@ class RigidOptions:
     plane_iterations : at most this many steps of the final point-to-plane refinement
         (:func:`refine_point_to_plane`; it stops when a step is negligible: from a pose 2-3 cm off,
         as the point-to-point stage can leave it, it needs about 40)
+    perturbations : restarts around the best refined pose (rotations by +-``perturb_degrees`` about
+        each axis, at most 6), kept if their scan-to-template residual is lower
+    distinct_degrees : poses whose rotations differ by more than this are distinct (for the check)
+    ambiguous_ratio : a distinct pose with a residual below this multiple of the best's makes the
+        pose ambiguous (:mod:`.rigidcheck`)
+    near : a scan point lies near the template within this fraction of the template's RMS radius
+    min_near_share : a pose with a smaller share of scan points near the template is doubtful
     """
 
     samples: int = 1500
     candidate_iterations: int = 5
-    refine_candidates: int = 2
+    refine_candidates: int = 3
     refine_iterations: int = 8
     keep_template: float = 0.6
     keep_scan: float = 0.9
     seed: int = 0
     scale: bool = True
     plane_iterations: int = 50
+    perturbations: int = 6
+    perturb_degrees: float = 10.0
+    distinct_degrees: float = 10.0
+    ambiguous_ratio: float = 1.1
+    near: float = 0.05
+    min_near_share: float = 0.5
 
     def __post_init__(self):
         least = {"samples": 10, "candidate_iterations": 0, "refine_candidates": 1, "refine_iterations": 0,
-                 "plane_iterations": 0, "seed": 0}
+                 "plane_iterations": 0, "seed": 0, "perturbations": 0}
         for k, lo in least.items():
             v = getattr(self, k)
             if isinstance(v, bool) or not (isinstance(v, (int, np.integer)) and v >= lo):
                 raise parameter_error(f"rigid_{k}", f"an integer >= {lo}", repr(v), label=f"rigid.{k}")
-        for k in ("keep_template", "keep_scan"):
+        for k in ("keep_template", "keep_scan", "near", "min_near_share"):
             v = getattr(self, k)
             if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and 0 < v <= 1):
                 raise parameter_error(f"rigid_{k}", "a fraction in (0, 1]", repr(v), label=f"rigid.{k}")
+        for k, lo, hi in (("perturb_degrees", 0.0, 90.0), ("distinct_degrees", 0.0, 180.0),
+                          ("ambiguous_ratio", 1.0, np.inf)):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and lo <= v <= hi):
+                raise parameter_error(f"rigid_{k}", f"a number in [{lo:g}, {hi:g}]", repr(v), label=f"rigid.{k}")
         if not isinstance(self.scale, (bool, np.bool_)):
             raise parameter_error("rigid_scale", "True or False", repr(self.scale), label="rigid.scale")
 
@@ -126,14 +145,19 @@ def umeyama(A: np.ndarray, B: np.ndarray, scale: bool = True) -> Similarity:
     return Similarity(s, R, mb - s * R @ ma)
 
 
-def area_samples(V: np.ndarray, F: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-    """``k`` points (k, 3) drawn uniformly by area on the triangles ``F`` of ``V``."""
+def area_samples(V: np.ndarray, F: np.ndarray, k: int, rng: np.random.Generator, normals: bool = False):
+    """``k`` points (k, 3) drawn uniformly by area on the triangles ``F`` of ``V`` (and, with
+    ``normals``, their triangles' unit normals (k, 3))."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     t = rng.choice(len(F), size=k, p=area / area.sum())
     r1, r2 = rng.random(k), rng.random(k)
     s = np.sqrt(r1)
-    return (1 - s)[:, None] * a[t] + (s * (1 - r2))[:, None] * b[t] + (s * r2)[:, None] * c[t]
+    P = (1 - s)[:, None] * a[t] + (s * (1 - r2))[:, None] * b[t] + (s * r2)[:, None] * c[t]
+    if not normals:
+        return P
+    N = np.cross(b[t] - a[t], c[t] - a[t])
+    return P, N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
 
 
 def principal_frame(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -208,6 +232,68 @@ def trimmed_icp(T_pts: np.ndarray, S_pts: np.ndarray, S_tree: cKDTree, sim: Simi
     return sim, score
 
 
+def scan_to_template_icp(T_tree: cKDTree, T_pts: np.ndarray, T_normals: np.ndarray, S_pts: np.ndarray,
+                         sim: Similarity, iterations: int, keep: float, scale: bool = True
+                         ) -> tuple[Similarity, float]:
+    """One-sided trimmed point-to-plane ICP with scale: each scan point to its closest template point.
+
+    Every point of a scan has a counterpart on a whole-head template, not every template point one on
+    the scan (a face-only scan); this residual does not pull the template onto parts the scan lacks.
+    The scan is mapped into the template's frame for the queries, so the template's tree is built
+    once. Each step solves the linearised point-to-plane problem of :func:`refine_point_to_plane` with
+    the template's normals (point-to-point ICP needs several times as many steps to slide into place).
+
+    Parameters
+    ----------
+    T_tree : tree of the template points ``T_pts`` (p, 3), ``T_normals`` (p, 3) their unit normals
+    S_pts : (q, 3) scan points
+    sim : start similarity (template -> scan)
+    keep : fraction of the scan's pairs kept (the closest ones)
+
+    Returns
+    -------
+    sim : refined similarity
+    residual : trimmed RMS scan-to-template point distance in scan units (after the last step)
+    """
+    res = np.inf
+    for it in range(iterations + 1):
+        d, j = T_tree.query(sim.inverse().apply(S_pts))
+        k = _trimmed(d, keep)
+        res = float(sim.scale * np.sqrt(np.mean(d[k] ** 2)))
+        if it == iterations or len(k) < 7:
+            break
+        X, n = sim.apply(T_pts[j[k]]), T_normals[j[k]] @ sim.rotation.T
+        sim = sim.then(_plane_step(X, S_pts[k], n, scale)[0])
+    return sim, res
+
+
+def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> tuple[Similarity, np.ndarray]:
+    """The similarity step that moves points ``X`` (k, 3) onto the planes through ``Q`` with normals
+    ``n``: ``x -> c + (1 + d)(I + [w]x)(x - c) + t`` linearised about the centroid ``c`` of ``X``,
+    the 7 x 7 (6 x 6 without scale) normal equations of ``sum ((x' - q) . n)^2``; also the step's
+    unknowns ``x`` (w, t[, d])."""
+    r0 = ((X - Q) * n).sum(1)
+    c = X.mean(0)
+    y = X - c
+    J = np.concatenate([np.cross(y, n), n, (y * n).sum(1, keepdims=True)], 1)  # (k, 7): w, t, d
+    if not scale:
+        J = J[:, :6]
+    H = J.T @ J
+    x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(len(H)), -J.T @ r0)
+    R = _rotation_from_vector(x[:3])
+    s = 1.0 + x[6] if scale else 1.0
+    return Similarity(s, R, c - s * R @ c + x[3:6]), x
+
+
+def _rotation_angle(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def _perturbations(degrees: float) -> list[np.ndarray]:
+    """Rotations by +-``degrees`` about each coordinate axis (6)."""
+    return [_rotation_from_vector(sign * np.radians(degrees) * e) for e in np.eye(3) for sign in (1.0, -1.0)]
+
+
 def align_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.ndarray,
                      options: RigidOptions = RigidOptions(), start: Similarity | None = None
                      ) -> tuple[Similarity, float]:
@@ -222,36 +308,60 @@ def align_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.
     Returns
     -------
     sim : template -> scan similarity
-    score : trimmed symmetric RMS residual in template units
+    score : trimmed RMS scan-to-template residual in template units
+    """
+    res = search_similarity(T_V, T_F, S_V, S_F, options, start)
+    return res.similarity, res.score
+
+
+def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.ndarray,
+                      options: RigidOptions = RigidOptions(), start: Similarity | None = None
+                      ) -> RigidResult:
+    """:func:`align_similarity` with the check of the found pose (:class:`RigidResult`).
+
+    Stages: the 24 principal-frame candidates, each a few steps of symmetric trimmed ICP on sparse
+    samples (:func:`trimmed_icp`); the ``refine_candidates`` best of them, pairwise distinct, and
+    ``perturbations`` restarts around the best so far, each refined by the one-sided scan-to-template
+    ICP (:func:`scan_to_template_icp`) on dense samples; the pose with the lowest scan-to-template
+    residual is kept. The refined candidates also give the check (:func:`.rigidcheck.pose_check`): one
+    ending at a distinct pose (rotation differing by more than ``options.distinct_degrees``) with a
+    residual within ``options.ambiguous_ratio`` of the best makes the pose ambiguous.
     """
     rng = np.random.default_rng(options.seed)
     scan_samples = area_samples(S_V, S_F, 4 * options.samples, rng)
-    dense = area_samples(S_V, S_F, 16 * options.samples, rng)  # the scan as the refinement sees it
-    S_tree = cKDTree(dense)
-    T_fine = area_samples(T_V, T_F, 4 * options.samples, rng)
-    if start is not None:
-        return trimmed_icp(T_fine, dense, S_tree, start, options.refine_iterations, options,
-                           scan_pts=scan_samples)
+    T_dense, T_N = area_samples(T_V, T_F, 16 * options.samples, rng, normals=True)
+    T_tree = cKDTree(T_dense)
     ct, At, rt = principal_frame(T_V, T_F)
-    cs, As, rs = principal_frame(S_V, S_F)
-    T_s = area_samples(T_V, T_F, options.samples, rng)
-    S_s = scan_samples[: options.samples]
-    S_s_tree = cKDTree(S_s)
-    results = []
-    for G in _cube_rotations():  # 24 candidate orientations (loop over candidates, not points)
-        R = As @ G @ At.T
-        s = rs / rt if options.scale else 1.0
-        sim0 = Similarity(s, R, cs - s * R @ ct)
-        sim, score = trimmed_icp(T_s, S_s, S_s_tree, sim0, options.candidate_iterations, options)
-        results.append((score, sim))
-    results.sort(key=lambda r: r[0])
-    best = None
-    for _, sim in results[: options.refine_candidates]:
-        sim, score = trimmed_icp(T_fine, dense, S_tree, sim, options.refine_iterations, options,
-                                 scan_pts=scan_samples)
-        if best is None or score < best[1]:
-            best = (sim, score)
-    return best
+    if start is not None:
+        starts = [start]
+    else:
+        cs, As, rs = principal_frame(S_V, S_F)
+        T_s = area_samples(T_V, T_F, options.samples, rng)
+        S_s = scan_samples[: options.samples]
+        S_s_tree = cKDTree(S_s)
+        results = []
+        for G in _cube_rotations():  # 24 candidate orientations (loop over candidates, not points)
+            R = As @ G @ At.T
+            s = rs / rt if options.scale else 1.0
+            sim0 = Similarity(s, R, cs - s * R @ ct)
+            sim, score = trimmed_icp(T_s, S_s, S_s_tree, sim0, options.candidate_iterations, options)
+            results.append((score, sim))
+        results.sort(key=lambda r: r[0])
+        starts = []
+        for _, sim in results:  # the best few, pairwise distinct
+            if all(_rotation_angle(sim.rotation @ o.rotation.T) > options.distinct_degrees for o in starts):
+                starts.append(sim)
+            if len(starts) == options.refine_candidates:
+                break
+    refined = [scan_to_template_icp(T_tree, T_dense, T_N, scan_samples, s0, options.refine_iterations,
+                                    options.keep_scan, options.scale) for s0 in starts]
+    best = min(refined, key=lambda r: r[1])[0]
+    for P in _perturbations(options.perturb_degrees)[: options.perturbations]:
+        c = best.apply(T_dense).mean(0)  # turn about the template's centre as placed on the scan
+        s0 = best.then(Similarity(1.0, P, c - P @ c))
+        refined.append(scan_to_template_icp(T_tree, T_dense, T_N, scan_samples, s0, options.refine_iterations,
+                                            options.keep_scan, options.scale))
+    return pose_check(refined, 0 if start is not None else len(starts), T_tree, scan_samples, rt, options)
 
 
 def _rotation_from_vector(w: np.ndarray) -> np.ndarray:
@@ -289,22 +399,13 @@ def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iteration
     for _ in range(iterations):
         X = sim.apply(T_pts)
         Q, N, dist, rim = closest(X)
-        r0 = ((X - Q) * N).sum(1)
         idx = _trimmed(np.where(rim, np.inf, dist), keep)
         idx = idx[~rim[idx]]
         if len(idx) < 7:
             break
-        c = X[idx].mean(0)
-        y, n = X[idx] - c, N[idx]
-        J = np.concatenate([np.cross(y, n), n, (y * n).sum(1, keepdims=True)], 1)  # (k, 7): w, t, d
-        if not scale:
-            J = J[:, :6]
-        rms = float(np.sqrt(np.mean(r0[idx] ** 2))) / sim.scale
-        H = J.T @ J
-        x = np.linalg.solve(H + 1e-12 * np.trace(H) * np.eye(len(H)), -J.T @ r0[idx])
-        R = _rotation_from_vector(x[:3])
-        s = 1.0 + x[6] if scale else 1.0
-        sim = sim.then(Similarity(s, R, c - s * R @ c + x[3:6]))
+        rms = float(np.sqrt(np.mean(((X[idx] - Q[idx]) * N[idx]).sum(1) ** 2))) / sim.scale
+        step, x = _plane_step(X[idx], Q[idx], N[idx], scale)
+        sim = sim.then(step)
         if np.abs(x).max() < tolerance:
             break
     return sim, rms

@@ -109,7 +109,7 @@ class RegistrationResult:
     distance : (n,) distance of each vertex to the scan surface (scan units)
     no_surface : (n,) bool, vertices that found no usable scan surface (followed the stiffness term)
     iterations : non-rigid ICP iterations over all stiffness levels
-    rigid_score : trimmed RMS of the rigid stage (template units)
+    rigid_score : trimmed RMS of the rigid stage (template units): the search's scan-to-template residual before a model fit, else the final point-to-plane RMS
     rigid_check : the check of the rigid search's pose (:class:`~.rigidcheck.RigidResult`), or None
     landmark_error : (k,) distance of each registered landmark vertex to its scan landmark, or None
     seconds : wall time

@@ -1,15 +1,17 @@
 """Similarity (rotation, translation, uniform scale) alignment of a template to a scan.
 
 Two ways in: from corresponding landmarks (closed form, Umeyama 1991), or, without landmarks, a
-search over candidate orientations followed by trimmed, symmetric ICP with scale. The search is
-needed because a face scan and the template may start in very different poses, and plain ICP (or
-trimesh's ``mesh_other``) from a single start falls into a wrong minimum on such data.
+search over candidate orientations. The search is needed because a face scan and the template may
+start in very different poses, and plain ICP (or trimesh's ``mesh_other``) from a single start falls
+into a wrong minimum on such data.
 
 Candidate starts: both shapes are centred on their area-weighted centroids, scaled by their
 area-weighted RMS radius and turned into their principal axes; the 24 proper rotations that map
 the template's principal axes onto the scan's (any order, any signs with determinant +1) are each
-refined by a few ICP steps on area-sampled points. The best few by trimmed symmetric residual are
-refined further and the best one kept.
+refined by a few steps of trimmed symmetric ICP with scale on area-sampled points. The best few
+distinct ones by that residual, and restarts turned a little around the best of them, are refined by
+one-sided (scan to template) trimmed point-to-plane ICP, and the pose with the lowest one-sided
+residual is kept and checked (:mod:`.rigidcheck`).
 
 References
 ----------
@@ -27,7 +29,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import parameter_error
-from .rigidcheck import RigidResult, pose_check
+from .rigidcheck import RigidResult, pose_check, rotation_angle, trimmed
+
+#: the restarts' axes and turning directions (:func:`_perturbations`)
+_AXIS_SIGNS = tuple((e, sign) for e in np.eye(3) for sign in (1.0, -1.0))
 
 
 @dataclass(frozen=True)
@@ -82,8 +87,10 @@ class RigidOptions:
         (:func:`refine_point_to_plane`; it stops when a step is negligible: from a pose 2-3 cm off,
         as the point-to-point stage can leave it, it needs about 40)
     perturbations : restarts around the best refined pose (rotations by +-``perturb_degrees`` about
-        each axis, at most 6), kept if their scan-to-template residual is lower
-    distinct_degrees : poses whose rotations differ by more than this are distinct (for the check)
+        each axis: 0 to 6), kept if their scan-to-template residual is lower
+    perturb_degrees : the restarts' rotation, in (0, 90]
+    distinct_degrees : poses whose rotations differ by more than this, in (0, 90], are distinct: it
+        selects the search candidates that are refined (pairwise distinct) and the check's runner-up
     ambiguous_ratio : a distinct pose with a residual below this multiple of the best's makes the
         pose ambiguous (:mod:`.rigidcheck`)
     near : a scan point lies near the template within this fraction of the template's RMS radius
@@ -117,11 +124,16 @@ class RigidOptions:
             v = getattr(self, k)
             if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and 0 < v <= 1):
                 raise parameter_error(f"rigid_{k}", "a fraction in (0, 1]", repr(v), label=f"rigid.{k}")
-        for k, lo, hi in (("perturb_degrees", 0.0, 90.0), ("distinct_degrees", 0.0, 180.0),
-                          ("ambiguous_ratio", 1.0, np.inf)):
+        if not self.perturbations <= len(_AXIS_SIGNS):
+            raise parameter_error("rigid_perturbations", f"an integer in [0, {len(_AXIS_SIGNS)}]",
+                                  repr(self.perturbations), label="rigid.perturbations")
+        for k, lo, hi, closed in (("perturb_degrees", 0.0, 90.0, False), ("distinct_degrees", 0.0, 90.0, False),
+                                  ("ambiguous_ratio", 1.0, np.inf, True)):
             v = getattr(self, k)
-            if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and lo <= v <= hi):
-                raise parameter_error(f"rigid_{k}", f"a number in [{lo:g}, {hi:g}]", repr(v), label=f"rigid.{k}")
+            ok = isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and v <= hi
+            if not (ok and (v >= lo if closed else v > lo)):
+                raise parameter_error(f"rigid_{k}", f"a number in {'[' if closed else '('}{lo:g}, {hi:g}]", repr(v),
+                                      label=f"rigid.{k}")
         if not isinstance(self.scale, (bool, np.bool_)):
             raise parameter_error("rigid_scale", "True or False", repr(self.scale), label="rigid.scale")
 
@@ -192,41 +204,33 @@ def _cube_rotations() -> list[np.ndarray]:
     return out
 
 
-def _trimmed(d: np.ndarray, keep: float) -> np.ndarray:
-    k = max(3, int(round(keep * len(d))))
-    return np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
-
-
-def trimmed_icp(T_pts: np.ndarray, S_pts: np.ndarray, S_tree: cKDTree, sim: Similarity, iterations: int,
-                options: RigidOptions, T_tree_pts: np.ndarray | None = None,
-                scan_pts: np.ndarray | None = None) -> tuple[Similarity, float]:
+def trimmed_icp(T_pts: np.ndarray, T_tree: cKDTree, S_pts: np.ndarray, S_tree: cKDTree, sim: Similarity,
+                iterations: int, options: RigidOptions) -> tuple[Similarity, float]:
     """Symmetric trimmed ICP with scale from a start ``sim`` (template -> scan).
 
     Parameters
     ----------
-    T_pts : (p, 3) template points, mapped to the scan by ``sim``
-    S_pts : (q, 3) scan points searched for template points' partners (``S_tree`` is their tree)
-    T_tree_pts : (r, 3) template points searched for the scan points' partners (default ``T_pts``)
-    scan_pts : (r', 3) scan points matched to the template (default: every k-th of ``S_pts``)
+    T_pts : (p, 3) template points, mapped to the scan by ``sim`` (``T_tree`` is their tree, template frame)
+    S_pts : (q, 3) scan points (``S_tree`` is their tree); every k-th (about p of them) is matched to the
+        template, in the template's frame, so neither tree is rebuilt
     iterations : ICP steps
+
     Returns
     -------
     sim : the refined similarity
     score : trimmed symmetric RMS distance divided by the scale (template units), lower is better
     """
-    T_tree_pts = T_pts if T_tree_pts is None else T_tree_pts
-    scan_q = S_pts[:: max(1, len(S_pts) // max(len(T_pts), 1))] if scan_pts is None else scan_pts
+    scan_q = S_pts[:: max(1, len(S_pts) // max(len(T_pts), 1))]
     score = np.inf
     for it in range(iterations + 1):
-        X = sim.apply(T_pts)
-        d1, j1 = S_tree.query(X)
-        Y = sim.apply(T_tree_pts)
-        d2, j2 = cKDTree(Y).query(scan_q)
-        k1, k2 = _trimmed(d1, options.keep_template), _trimmed(d2, options.keep_scan)
+        d1, j1 = S_tree.query(sim.apply(T_pts))
+        d2, j2 = T_tree.query(sim.inverse().apply(scan_q))
+        d2 = d2 * sim.scale  # scan units, as d1
+        k1, k2 = trimmed(d1, options.keep_template), trimmed(d2, options.keep_scan)
         score = float(np.sqrt((np.sum(d1[k1] ** 2) + np.sum(d2[k2] ** 2)) / (len(k1) + len(k2)))) / sim.scale
         if it == iterations:
             break
-        A = np.concatenate([T_pts[k1], T_tree_pts[j2[k2]]])
+        A = np.concatenate([T_pts[k1], T_pts[j2[k2]]])
         B = np.concatenate([S_pts[j1[k1]], scan_q[k2]])
         sim = umeyama(A, B, scale=options.scale)
     return sim, score
@@ -234,7 +238,7 @@ def trimmed_icp(T_pts: np.ndarray, S_pts: np.ndarray, S_tree: cKDTree, sim: Simi
 
 def scan_to_template_icp(T_tree: cKDTree, T_pts: np.ndarray, T_normals: np.ndarray, S_pts: np.ndarray,
                          sim: Similarity, iterations: int, keep: float, scale: bool = True
-                         ) -> tuple[Similarity, float]:
+                         ) -> tuple[Similarity, float, np.ndarray]:
     """One-sided trimmed point-to-plane ICP with scale: each scan point to its closest template point.
 
     Every point of a scan has a counterpart on a whole-head template, not every template point one on
@@ -254,17 +258,18 @@ def scan_to_template_icp(T_tree: cKDTree, T_pts: np.ndarray, T_normals: np.ndarr
     -------
     sim : refined similarity
     residual : trimmed RMS scan-to-template point distance in scan units (after the last step)
+    distances : (q,) each scan point's distance to the template at ``sim``, template units
     """
     res = np.inf
     for it in range(iterations + 1):
         d, j = T_tree.query(sim.inverse().apply(S_pts))
-        k = _trimmed(d, keep)
+        k = trimmed(d, keep)
         res = float(sim.scale * np.sqrt(np.mean(d[k] ** 2)))
         if it == iterations or len(k) < 7:
             break
         X, n = sim.apply(T_pts[j[k]]), T_normals[j[k]] @ sim.rotation.T
         sim = sim.then(_plane_step(X, S_pts[k], n, scale)[0])
-    return sim, res
+    return sim, res, d
 
 
 def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> tuple[Similarity, np.ndarray]:
@@ -285,13 +290,9 @@ def _plane_step(X: np.ndarray, Q: np.ndarray, n: np.ndarray, scale: bool) -> tup
     return Similarity(s, R, c - s * R @ c + x[3:6]), x
 
 
-def _rotation_angle(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
-
-
 def _perturbations(degrees: float) -> list[np.ndarray]:
     """Rotations by +-``degrees`` about each coordinate axis (6)."""
-    return [_rotation_from_vector(sign * np.radians(degrees) * e) for e in np.eye(3) for sign in (1.0, -1.0)]
+    return [_rotation_from_vector(sign * np.radians(degrees) * e) for e, sign in _AXIS_SIGNS]
 
 
 def align_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.ndarray,
@@ -303,7 +304,8 @@ def align_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np.
     ----------
     T_V : (n, 3), T_F : (m, 3) the template
     S_V : (N, 3), S_F : (M, 3) the scan (any topology, holes allowed)
-    start : a known start (e.g. from landmarks); then only the refinement runs
+    start : a known start (e.g. from landmarks); then the candidate search is skipped: the start and
+        the restarts around it are refined
 
     Returns
     -------
@@ -338,18 +340,18 @@ def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np
         cs, As, rs = principal_frame(S_V, S_F)
         T_s = area_samples(T_V, T_F, options.samples, rng)
         S_s = scan_samples[: options.samples]
-        S_s_tree = cKDTree(S_s)
+        S_s_tree, T_s_tree = cKDTree(S_s), cKDTree(T_s)
         results = []
         for G in _cube_rotations():  # 24 candidate orientations (loop over candidates, not points)
             R = As @ G @ At.T
             s = rs / rt if options.scale else 1.0
             sim0 = Similarity(s, R, cs - s * R @ ct)
-            sim, score = trimmed_icp(T_s, S_s, S_s_tree, sim0, options.candidate_iterations, options)
+            sim, score = trimmed_icp(T_s, T_s_tree, S_s, S_s_tree, sim0, options.candidate_iterations, options)
             results.append((score, sim))
         results.sort(key=lambda r: r[0])
         starts = []
         for _, sim in results:  # the best few, pairwise distinct
-            if all(_rotation_angle(sim.rotation @ o.rotation.T) > options.distinct_degrees for o in starts):
+            if all(rotation_angle(sim.rotation @ o.rotation.T) > options.distinct_degrees for o in starts):
                 starts.append(sim)
             if len(starts) == options.refine_candidates:
                 break
@@ -361,7 +363,7 @@ def search_similarity(T_V: np.ndarray, T_F: np.ndarray, S_V: np.ndarray, S_F: np
         s0 = best.then(Similarity(1.0, P, c - P @ c))
         refined.append(scan_to_template_icp(T_tree, T_dense, T_N, scan_samples, s0, options.refine_iterations,
                                             options.keep_scan, options.scale))
-    return pose_check(refined, 0 if start is not None else len(starts), T_tree, scan_samples, rt, options)
+    return pose_check(refined, 0 if start is not None else len(starts), rt, options)
 
 
 def _rotation_from_vector(w: np.ndarray) -> np.ndarray:
@@ -399,7 +401,7 @@ def refine_point_to_plane(T_pts: np.ndarray, closest, sim: Similarity, iteration
     for _ in range(iterations):
         X = sim.apply(T_pts)
         Q, N, dist, rim = closest(X)
-        idx = _trimmed(np.where(rim, np.inf, dist), keep)
+        idx = trimmed(np.where(rim, np.inf, dist), keep)
         idx = idx[~rim[idx]]
         if len(idx) < 7:
             break

@@ -8,11 +8,8 @@ import pytest
 
 from facebasis.errors import InputError
 from facebasis.geometry.rigid import RigidOptions, search_similarity, umeyama
+from facebasis.geometry.rigidcheck import rotation_angle
 from problems.bench_registration import random_rotation
-
-
-def _angle(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
 
 
 def _faces():
@@ -32,22 +29,40 @@ def _cut(V, F, lo, hi):
     return V[used], remap[Fk], used
 
 
-def test_a_partial_cut_of_another_face_is_found_in_any_pose():
-    """The centre of the other person's face (nose, eyes, mouth: about a third of the template's width,
-    half its height) in random poses: the pose is within 3 degrees of the best similarity of the
-    template onto that person, its scale within 5 %, and the check does not doubt it."""
+#: cuts of the other person's face (boxes of triangle centroids, the built-in face's units: 14.6 wide, 18 high)
+CUTS = {"centre": ((-3.5, -6.0, -1.0), (3.5, 4.0, 10.0)),  # nose, eyes, mouth: a third of the template
+        "left half": ((-9.0, -10.0, -1.0), (0.0, 10.0, 10.0)),
+        "front": ((-9.0, -10.0, 2.0), (9.0, 10.0, 10.0)),
+        "eyes and nose": ((-6.0, -3.0, -1.0), (6.0, 5.0, 10.0))}
+
+
+def _search_cut(box, seed):
     T_V, T_F, person = _faces()
-    part, part_F, used = _cut(person, T_F, np.array([-3.5, -6.0, -1.0]), np.array([3.5, 4.0, 10.0]))
-    assert len(part_F) < 0.4 * len(T_F)
-    best0 = umeyama(T_V, person)
-    rng = np.random.default_rng(3)
-    for _ in range(4):
-        R, t = random_rotation(rng), rng.uniform(-30, 30, 3)
-        res = search_similarity(T_V, T_F, part @ R.T + t, part_F, RigidOptions(samples=800))
-        assert _angle(res.similarity.rotation @ (R @ best0.rotation).T) < 3.0
-        assert abs(res.similarity.scale / best0.scale - 1) < 0.05
-        assert res.near_share > 0.9 and not res.ambiguous and not res.doubtful
-        assert res.warning() is None
+    part, part_F, _ = _cut(person, T_F, np.array(box[0]), np.array(box[1]))
+    rng = np.random.default_rng(seed)
+    R, t = random_rotation(rng), rng.uniform(-30, 30, 3)
+    res = search_similarity(T_V, T_F, part @ R.T + t, part_F, RigidOptions(samples=800))
+    best0 = umeyama(T_V, person)  # the best similarity of the template onto the whole person
+    return res, rotation_angle(res.similarity.rotation @ (R @ best0.rotation).T), res.similarity.scale / best0.scale
+
+
+@pytest.mark.parametrize("name", list(CUTS))
+def test_a_partial_cut_of_another_face_is_found(name):
+    """Cuts of the other person's face (a third to nine tenths of it) in a random pose: the pose is within
+    3 degrees of the best similarity of the template onto that person, its scale within 7 %, and the
+    check does not doubt it. (The candidates come from principal frames, so the cut's pose does not
+    matter: different cuts are different cases, different poses of one cut are not.)"""
+    res, angle, scale = _search_cut(CUTS[name], seed=3)
+    assert angle < 3.0 and abs(scale - 1) < 0.07
+    assert res.near_share > 0.9 and not res.ambiguous and not res.doubtful
+    assert res.warning() is None
+
+
+@pytest.mark.xfail(strict=True, reason="known limit (rigidcheck docstring): a half face is laid upside down "
+                   "(179.6 degrees off; the one-sided residual prefers it) and the check cannot see a missed basin")
+def test_the_lower_half_of_a_face_is_found():
+    res, angle, _ = _search_cut(((-9.0, -10.0, -1.0), (9.0, 0.0, 10.0)), seed=3)
+    assert angle < 3.0 or res.doubtful
 
 
 def _ellipsoid(axes):
@@ -102,8 +117,12 @@ def test_register_warns_in_one_line_when_the_pose_is_doubtful(tmp_path, capsys):
 
 @pytest.mark.parametrize("kw, match", [
     (dict(perturbations=-1), r"rigid\.perturbations: expected an integer >= 0, found -1"),
-    (dict(perturb_degrees=120.0), r"rigid\.perturb_degrees: expected a number in \[0, 90\], found 120\.0"),
-    (dict(distinct_degrees="10"), r"rigid\.distinct_degrees: expected a number in \[0, 180\], found '10'"),
+    (dict(perturbations=50), r"rigid\.perturbations: expected an integer in \[0, 6\], found 50"),
+    (dict(perturb_degrees=120.0), r"rigid\.perturb_degrees: expected a number in \(0, 90\], found 120\.0"),
+    (dict(perturb_degrees=0), r"rigid\.perturb_degrees: expected a number in \(0, 90\], found 0"),
+    (dict(distinct_degrees="10"), r"rigid\.distinct_degrees: expected a number in \(0, 90\], found '10'"),
+    (dict(distinct_degrees=0.0), r"rigid\.distinct_degrees: expected a number in \(0, 90\], found 0\.0"),
+    (dict(distinct_degrees=180), r"rigid\.distinct_degrees: expected a number in \(0, 90\], found 180"),
     (dict(ambiguous_ratio=0.5), r"rigid\.ambiguous_ratio: expected a number in \[1, inf\], found 0\.5"),
     (dict(near=0.0), r"rigid\.near: expected a fraction in \(0, 1\], found 0\.0"),
     (dict(min_near_share=2), r"rigid\.min_near_share: expected a fraction in \(0, 1\], found 2"),

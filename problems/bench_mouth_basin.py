@@ -23,7 +23,8 @@ mouthFunnel, mouthClose and jawOpen + mouthClose (the lips closed: they must sta
 and from a second generator jawOpen at 0.3 and 0.7 (an opened mouth: a hole between the lips), all of the
 person's own (personalised) rig.
 
-Writes ``seed<S>.csv`` per run (one row per person, scan and method: error median / p95 / max on the face,
+Writes ``seed<S>.csv`` per run, keeping the rows of other methods already in it (a method run again replaces
+its rows; one row per person, scan and method: error median / p95 / max on the face,
 cm, in the scan's frame; CPU and wall seconds; the load; the whole fit's jawOpen, mouthClose and
 mouthShrugLower weights) and with ``--table`` ``mouth_basin.md`` from every ``seed*.csv`` in ``--out``.
 """
@@ -150,12 +151,7 @@ def write_table(out: Path) -> Path:
     figures and a line of totals (scans over the targets, worst p95, CPU)."""
     from facebasis.atomic import atomic_write_bytes
 
-    rows = []
-    for p in sorted(out.glob("seed*.csv")):
-        with open(p, newline="") as fh:
-            rows += list(csv.DictReader(fh))
-    for r in rows:  # rows written before the schedules: the pairs from the first round
-        r.setdefault("schedule", "one-sided" if int(r["scan_pairs"]) == 0 else "joint")
+    rows = [r for p in sorted(out.glob("seed*.csv")) for r in _rows(p)]
     mkey = lambda r: (int(r["scan_pairs"]), r["schedule"])  # noqa: E731
     methods = sorted({mkey(r) for r in rows}, key=lambda m: (m[0], m[1] != "joint"))
     label = lambda m: str(m[0]) if m[0] == 0 else f"{m[0]} {m[1]}"  # noqa: E731
@@ -228,11 +224,28 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.table:
         return print(write_table(out))
+    ran = set(methods(args.scan_pairs, args.schedules))
     for seed in args.seeds:
+        old = _rows(out / f"seed{seed}.csv")
+        old = [r for r in old if (int(r["scan_pairs"]), r["schedule"]) not in ran]
         rows = []
         for kind in args.persons:
             rows += run_person(seed, kind, args.scan_pairs, args.schedules)
-            atomic_write_bytes(out / f"seed{seed}.csv", _csv_bytes(rows))  # after every person: kept if stopped
+            atomic_write_bytes(out / f"seed{seed}.csv", _csv_bytes(old + rows))  # after every person: kept if stopped
+
+
+def _rows(path: Path) -> list[dict]:
+    """The rows of a ``seed<S>.csv`` (none if absent), with the columns written since (``schedule``: rows before
+    it had the pairs from the first round; the ``after`` schedule's columns empty)."""
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        r.setdefault("schedule", "one-sided" if int(r["scan_pairs"]) == 0 else "joint")
+        for k in ("kept", *(f"s2_{c}" for c in CANDIDATES), *(f"whole_p95_{c}" for c in CANDIDATES)):
+            r.setdefault(k, "")
+    return rows
 
 
 if __name__ == "__main__":

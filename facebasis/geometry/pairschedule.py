@@ -30,7 +30,7 @@ Measured (``problems.bench_mouth_basin``, reports/registration/mouth_basin: 9 mo
 the first round: 2; no pairs: 9), worst p95 0.127 cm; CPU per scan median 6.6 s, max 10.0 s (load 13-27; the
 joint schedule 5.0 / 8.3 s at load 7-32). Eq. S2 kept the continued fit on 87 of 90; on 15 (opened jaws) the
 kept fit's face p95 before the regional stage was 0.01-0.05 cm above the other's, where the two S2 differed by
-under 5 %: the regional stage then brought both within the targets.
+under 10 %: the regional stage then brought both within the targets.
 """
 
 from __future__ import annotations

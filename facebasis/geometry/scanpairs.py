@@ -40,6 +40,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: eq. S3's slack, in the model's edge lengths: a scan point's distance to its model vertex may exceed that
+#: vertex's own distance to the scan by this much (the vertices' spacing, noise)
+SLACK = 0.5
+
 
 class ScanToModel:
     """A seeded sample of scan vertices, paired each round with the nearest model vertex (eq. S1).
@@ -62,6 +66,7 @@ class ScanToModel:
         self.use = np.asarray(use)
         self.dmax = options.max_distance * h
         self.cos_max = np.cos(np.radians(options.normal_angle))
+        self.surface, self.slack = surface, SLACK * h
 
     def pairs(self, X: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(model vertex indices, scan points, scan normals)`` of the kept pairs, for the model at ``X``
@@ -70,4 +75,11 @@ class ScanToModel:
         far = ~np.isfinite(dist)
         i = self.use[np.where(far, 0, j)]
         ok = ~far & ((normals[i] * self.N).sum(1) >= self.cos_max)
-        return i[ok], self.Q[ok], self.N[ok]
+        i, dist = i[ok], dist[ok]
+        # eq. S3: a scan point pulls its model vertex only where the scan has nothing nearer that vertex, or
+        # only a rim farther than the slack (the vertex lies over a hole); else the point is on a layer the
+        # model lacks (hair, a cap) in front of surface the vertex already lies on
+        own, k = self.surface.tree.query(X[i])
+        over_hole = self.surface.rim_vertex[self.surface._used[k]] & (own > self.slack)
+        mutual = (dist <= own + self.slack) | over_hole
+        return i[mutual], self.Q[ok][mutual], self.N[ok][mutual]

@@ -1,7 +1,7 @@
 """Benchmark: mouth expressions registered through the rig, with and without the scan-to-model pairs.
 
     python -m problems.bench_mouth_basin --seeds 3 [--persons detail in-space] [--scan-pairs 0 5000]
-        [--out reports/registration/mouth_basin]
+        [--schedules joint after] [--out reports/registration/mouth_basin]
     python -m problems.bench_mouth_basin --table --out reports/registration/mouth_basin
 
 Issue #27's expression fit (``geometry/shapemodel.py``: the registered neutral plus the template's expressions
@@ -11,7 +11,11 @@ the persons of :mod:`problems.bench_registration_rig` (seeded ICT identity from 
 expressions; ``detail``: plus a smooth normal field up to 2.5 mm), registers the neutral scan once (the
 library's defaults: the same neutral for every method) and then the mouth scans below with each
 ``--scan-pairs`` value (``ModelFitOptions.scan_pairs`` of the whole-expression fit, eq. S1 of
-``geometry/scanpairs.py``; 0: the model-to-scan pairs alone, the previous fit). Scans
+``geometry/scanpairs.py``; 0: the model-to-scan pairs alone, the previous fit) and, for values above 0, each
+``--schedules`` value (``RegistrationOptions.expression_pairs_schedule``, geometry/pairschedule.py: ``joint``, the
+pairs from the first round; ``after``, the one-sided fit first, then continued with the pairs, the fit with the
+smaller eq. S2 kept: the row also gives both fits' eq. S2, which one was kept and each one's face p95 before the
+regional stage, so that the choice can be checked against the truth). Scans
 (:func:`problems.bench_registration.make_scan`: another topology, ~100k vertices, shuffled, 0.2 mm noise,
 holes at the ears, mouth and eyes, a random rigid motion; no landmarks): the rig bench's own neutral,
 jawOpen, mouthSmile_L and mouthPucker scans (its generator, drawn in its order), then from the same generator
@@ -19,7 +23,8 @@ mouthFunnel, mouthClose and jawOpen + mouthClose (the lips closed: they must sta
 and from a second generator jawOpen at 0.3 and 0.7 (an opened mouth: a hole between the lips), all of the
 person's own (personalised) rig.
 
-Writes ``seed<S>.csv`` per run (one row per person, scan and method: error median / p95 / max on the face,
+Writes ``seed<S>.csv`` per run, keeping the rows of other methods already in it (a method run again replaces
+its rows; one row per person, scan and method: error median / p95 / max on the face,
 cm, in the scan's frame; CPU and wall seconds; the load; the whole fit's jawOpen, mouthClose and
 mouthShrugLower weights) and with ``--table`` ``mouth_basin.md`` from every ``seed*.csv`` in ``--out``.
 """
@@ -46,10 +51,33 @@ SCANS = (("jawOpen", {"jawOpen": 1.0}), ("mouthSmile_L", {"mouthSmile_L": 1.0}),
 SECOND = (("jawOpen 0.3", {"jawOpen": 0.3}), ("jawOpen 0.7", {"jawOpen": 0.7}))
 WEIGHTS = ("jawOpen", "mouthClose", "mouthShrugLower")  #: the whole fit's weights reported per scan
 TARGETS = {"median": 0.05, "p95": 0.2, "cpu": 10.0}
+CANDIDATES = ("one_sided", "continued")  #: the two fits of the ``after`` schedule, in its order
 
 
-def run_person(seed: int, kind: str, scan_pairs, log=print) -> list[dict]:
-    """Register one person's neutral, then its mouth scans with each ``scan_pairs`` value; rows."""
+def methods(scan_pairs, schedules) -> list[tuple[int, str]]:
+    """``(scan_pairs, schedule)`` pairs to run: 0 once (``one-sided``), every other value with each schedule."""
+    return [(sp, sch) for sp in scan_pairs for sch in (("one-sided",) if sp == 0 else schedules)]
+
+
+def _capture():
+    """Wrap the expression stage's :func:`~facebasis.geometry.pairschedule.whole_expression_fit` to record its
+    ``info`` (eq. S2 of both fits, which one was kept, the fits): a list, cleared by the caller per scan."""
+    import facebasis.geometry.expressionregions as er
+    from facebasis.geometry.pairschedule import whole_expression_fit
+
+    seen = []
+
+    def spy(*a, **k):
+        out = whole_expression_fit(*a, **k)
+        seen.append(out[1])
+        return out
+
+    er.whole_expression_fit = spy
+    return seen
+
+
+def run_person(seed: int, kind: str, scan_pairs, schedules=("joint", "after"), log=print) -> list[dict]:
+    """Register one person's neutral, then its mouth scans with each ``(scan_pairs, schedule)`` method; rows."""
     from facebasis.geometry.registration import Registration, RegistrationOptions
     from facebasis.geometry.shapemodel import ShapeBasis
     from problems.bench_registration_rig import person
@@ -76,25 +104,35 @@ def run_person(seed: int, kind: str, scan_pairs, log=print) -> list[dict]:
     base = RegistrationOptions()
     _, _, S, G, R, t = scans[0]
     neutral = Registration(T, F, base, name="ICT neutral", identity=ident, expressions=expr).register(S, G).vertices
-    rows = []
-    for sp in scan_pairs:
-        opts = dataclasses.replace(base, expression_fit=dataclasses.replace(base.expression_fit, scan_pairs=sp))
+    rows, seen = [], _capture()
+    for sp, sch in methods(scan_pairs, schedules):
+        opts = dataclasses.replace(base, expression_fit=dataclasses.replace(base.expression_fit, scan_pairs=sp),
+                                   expression_pairs_schedule="joint" if sch == "one-sided" else sch)
         reg = Registration(T, F, opts, name="ICT neutral", identity=ident, expressions=expr)
         E = reg.person_expressions(neutral)
         for nm, Vt, S, G, R, t in scans[1:]:
+            seen.clear()
             t0, c0 = time.perf_counter(), time.process_time()
             res = reg.register(S, G, start=neutral, expressions=E, name=nm)
             sec, cpu = time.perf_counter() - t0, time.process_time() - c0
-            e = np.linalg.norm(res.vertices[face] - (Vt @ R.T + t)[face], axis=1)
+            truth = (Vt @ R.T + t)[face]
+            e = np.linalg.norm(res.vertices[face] - truth, axis=1)
             w = res.model.coefficients
-            row = {"seed": seed, "person": kind, "scan": nm, "scan_pairs": sp, "err_median": float(np.median(e)),
-                   "err_p95": float(np.percentile(e, 95)), "err_max": float(e.max()), "seconds": sec,
-                   "cpu_seconds": cpu, "load": os.getloadavg()[0],
-                   **{f"w_{k}": float(w[names.index(k)]) for k in WEIGHTS}}
+            info = seen[0]
+            whole = [float(np.percentile(np.linalg.norm(res.similarity.apply(f.vertices)[face] - truth, axis=1), 95))
+                     for f in info.get("fits", ())]  # each candidate's face p95 before the regional stage
+            row = {"seed": seed, "person": kind, "scan": nm, "scan_pairs": sp, "schedule": sch,
+                   "err_median": float(np.median(e)), "err_p95": float(np.percentile(e, 95)), "err_max": float(e.max()),
+                   "seconds": sec, "cpu_seconds": cpu, "load": os.getloadavg()[0],
+                   **{f"w_{k}": float(w[names.index(k)]) for k in WEIGHTS},
+                   "kept": info.get("kept", ""), **{f"s2_{c}": (info["s2"][i] if "s2" in info else "")
+                                                    for i, c in enumerate(CANDIDATES)},
+                   **{f"whole_p95_{c}": (whole[i] if whole else "") for i, c in enumerate(CANDIDATES)}}
             rows.append(row)
-            log(f"seed {seed} {kind:8s} scan_pairs {sp:5d} {nm:21s} median {row['err_median']:.4f} p95 "
+            log(f"seed {seed} {kind:8s} scan_pairs {sp:5d} {sch:9s} {nm:21s} median {row['err_median']:.4f} p95 "
                 f"{row['err_p95']:.4f} max {row['err_max']:.3f} | jawOpen {row['w_jawOpen']:.2f} mouthClose "
-                f"{row['w_mouthClose']:.2f} mouthShrugLower {row['w_mouthShrugLower']:.2f} | {cpu:.1f} s CPU "
+                f"{row['w_mouthClose']:.2f} mouthShrugLower {row['w_mouthShrugLower']:.2f} | {row['kept']} "
+                f"{' '.join(str(row['s2_' + c])[:6] for c in CANDIDATES)} | {cpu:.1f} s CPU "
                 f"{sec:.1f} s wall load {row['load']:.1f}")
     return rows
 
@@ -113,40 +151,60 @@ def write_table(out: Path) -> Path:
     figures and a line of totals (scans over the targets, worst p95, CPU)."""
     from facebasis.atomic import atomic_write_bytes
 
-    rows = []
-    for p in sorted(out.glob("seed*.csv")):
-        with open(p, newline="") as fh:
-            rows += list(csv.DictReader(fh))
-    methods = sorted({int(r["scan_pairs"]) for r in rows})
+    rows = [r for p in sorted(out.glob("seed*.csv")) for r in _rows(p)]
+    mkey = lambda r: (int(r["scan_pairs"]), r["schedule"])  # noqa: E731
+    methods = sorted({mkey(r) for r in rows}, key=lambda m: (m[0], m[1] != "joint"))
+    label = lambda m: str(m[0]) if m[0] == 0 else f"{m[0]} {m[1]}"  # noqa: E731
     lines = ["# Mouth scans through the rig, with and without the scan-to-model pairs (cm, face vertices)", "",
              "Written by `python -m problems.bench_mouth_basin --table` from `seed*.csv` (commands: "
              "`python -m problems.reproduce registration-mouth-basin --dry-run`). `scan_pairs 0`: the model-to-scan "
              "pairs alone (the previous expression fit); otherwise that many scan vertices also pair with their "
-             "nearest model vertex (eq. S1 of geometry/scanpairs.py). Targets: median <= 0.05, p95 <= 0.2 cm, "
-             "<= 10 s CPU per scan.", ""]
+             "nearest model vertex (eq. S1 of geometry/scanpairs.py), from the first round (`joint`) or `after` a "
+             "one-sided fit, continued from it, the one with the smaller eq. S2 kept (geometry/pairschedule.py). "
+             "Targets: median <= 0.05, p95 <= 0.2 cm, <= 10 s CPU per scan.", ""]
     for m in methods:
-        sel = [r for r in rows if int(r["scan_pairs"]) == m]
+        sel = [r for r in rows if mkey(r) == m]
         bad = [r for r in sel if float(r["err_median"]) > TARGETS["median"] or float(r["err_p95"]) > TARGETS["p95"]]
         cpu = np.array([float(r["cpu_seconds"]) for r in sel])
         worst = max(sel, key=lambda r: float(r["err_p95"]))
-        lines.append(f"**scan_pairs {m}**: {len(sel)} scans, {len(bad)} over the targets; worst p95 "
+        lines.append(f"**scan_pairs {label(m)}**: {len(sel)} scans, {len(bad)} over the targets; worst p95 "
                      f"{float(worst['err_p95']):.3f} (seed {worst['seed']} {worst['person']} {worst['scan']}); CPU "
                      f"median {np.median(cpu):.1f} s, max {cpu.max():.1f} s; load {min(float(r['load']) for r in sel):.1f}-"
                      f"{max(float(r['load']) for r in sel):.1f}.")
-    lines += ["", "| seed | person | scan | " + " | ".join(f"p95 / median, pairs {m} | weights jawOpen, mouthClose, "
-                                                          f"mouthShrugLower ({m}) | CPU s ({m})" for m in methods)
+        lines += _choice_lines(sel)
+    lines += ["", "| seed | person | scan | " + " | ".join(f"p95 / median, pairs {label(m)} | weights jawOpen, mouthClose, "
+                                                          f"mouthShrugLower ({label(m)}) | CPU s ({label(m)})"
+                                                          for m in methods)
               + " |", "|" + "---|" * (3 + 3 * len(methods))]
     key = lambda r: (int(r["seed"]), r["person"], r["scan"])  # noqa: E731
     for k in dict.fromkeys(key(r) for r in rows):
         cells = []
         for m in methods:
-            r = next((r for r in rows if key(r) == k and int(r["scan_pairs"]) == m), None)
+            r = next((r for r in rows if key(r) == k and mkey(r) == m), None)
             cells += ["", "", ""] if r is None else [
                 f"{float(r['err_p95']):.3f} / {float(r['err_median']):.3f}",
                 ", ".join(f"{float(r['w_' + w]):.2f}" for w in WEIGHTS), f"{float(r['cpu_seconds']):.1f}"]
         lines.append(f"| {k[0]} | {k[1]} | {k[2]} | " + " | ".join(cells) + " |")
     atomic_write_bytes(out / "mouth_basin.md", ("\n".join(lines) + "\n").encode())
     return out / "mouth_basin.md"
+
+
+def _choice_lines(sel: list) -> list[str]:
+    """For the ``after`` schedule's rows: how often eq. S2 kept the fit with the smaller face p95 before the
+    regional stage (the truth; a difference under 0.01 cm counts as a tie), and the rows where it did not."""
+    sel = [r for r in sel if r.get("kept")]
+    if not sel:
+        return []
+    p95 = lambda r, c: float(r["whole_p95_" + c])  # noqa: E731
+    other = {"one-sided": "continued", "continued": "one-sided"}
+    wrong = [r for r in sel if p95(r, r["kept"].replace("-", "_")) > p95(r, other[r["kept"]].replace("-", "_")) + 0.01]
+    kept = sum(r["kept"] == "continued" for r in sel)
+    out = [f"  eq. S2 kept the continued fit on {kept} of {len(sel)} scans; it kept the fit with the larger whole-fit "
+           f"face p95 (by more than 0.01 cm) on {len(wrong)}."]
+    out += [f"  - seed {r['seed']} {r['person']} {r['scan']}: kept {r['kept']} (S2 {float(r['s2_one_sided']):.4f} / "
+            f"{float(r['s2_continued']):.4f} h, whole p95 {p95(r, 'one_sided'):.3f} / {p95(r, 'continued'):.3f} cm)"
+            for r in wrong]
+    return out
 
 
 def main(argv=None):
@@ -157,6 +215,8 @@ def main(argv=None):
     ap.add_argument("--persons", nargs="+", choices=("in-space", "detail"), default=["detail", "in-space"])
     ap.add_argument("--scan-pairs", type=int, nargs="+", default=[0, 5000],
                     help="ModelFitOptions.scan_pairs of the whole-expression fit; one method per value")
+    ap.add_argument("--schedules", nargs="+", choices=("joint", "after"), default=["joint", "after"],
+                    help="RegistrationOptions.expression_pairs_schedule for each --scan-pairs value above 0")
     ap.add_argument("--out", default="reports/registration/mouth_basin")
     ap.add_argument("--table", action="store_true", help="only write mouth_basin.md from the seed*.csv files")
     args = ap.parse_args(argv)
@@ -164,11 +224,28 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.table:
         return print(write_table(out))
+    ran = set(methods(args.scan_pairs, args.schedules))
     for seed in args.seeds:
+        old = _rows(out / f"seed{seed}.csv")
+        old = [r for r in old if (int(r["scan_pairs"]), r["schedule"]) not in ran]
         rows = []
         for kind in args.persons:
-            rows += run_person(seed, kind, args.scan_pairs)
-            atomic_write_bytes(out / f"seed{seed}.csv", _csv_bytes(rows))  # after every person: kept if stopped
+            rows += run_person(seed, kind, args.scan_pairs, args.schedules)
+            atomic_write_bytes(out / f"seed{seed}.csv", _csv_bytes(old + rows))  # after every person: kept if stopped
+
+
+def _rows(path: Path) -> list[dict]:
+    """The rows of a ``seed<S>.csv`` (none if absent), with the columns written since (``schedule``: rows before
+    it had the pairs from the first round; the ``after`` schedule's columns empty)."""
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        r.setdefault("schedule", "one-sided" if int(r["scan_pairs"]) == 0 else "joint")
+        for k in ("kept", *(f"s2_{c}" for c in CANDIDATES), *(f"whole_p95_{c}" for c in CANDIDATES)):
+            r.setdefault(k, "")
+    return rows
 
 
 if __name__ == "__main__":

@@ -268,12 +268,25 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-mouth-basin", "Mouth scans (jawOpen at 0.3-1, mouthClose, jawOpen + mouthClose, mouthFunnel, "
            "mouthPucker, mouthSmile_L) registered through the rig with and without the expression fit's scan-to-model "
            "pairs (eq. S1 of geometry/scanpairs.py; 0: the previous fit, lips closed over an opened mouth's hole), "
-           "seeds 0-4, both persons",
+           "from the first round (joint) or after a one-sided fit, the fit with the smaller eq. S2 kept (after: "
+           "geometry/pairschedule.py, the default), seeds 0-4, both persons. The 0 and joint columns were made "
+           "by the first commands at commit 5dd7fc6 (branch jaw3, before the merge of rigid3's rigid stage: the scans "
+           "near a basin's edge may land elsewhere on today's code, e.g. seed 4 in-space mouthClose, pairs 0: p95 0.042 "
+           "then, 0.375 now); the after column by the second ones, added to the same files",
            tuple(f"registration/mouth_basin/seed{s}.csv" for s in range(5)) + ("registration/mouth_basin/mouth_basin.md",),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_mouth_basin --seeds {s} --persons detail in-space "
-                 "--scan-pairs 0 5000 --out reports/registration/mouth_basin" for s in range(5))
+                 "--scan-pairs 0 5000 --schedules joint --out reports/registration/mouth_basin" for s in range(5))
+           + tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_mouth_basin --seeds {s} --persons detail in-space "
+                   "--scan-pairs 5000 --schedules after --out reports/registration/mouth_basin" for s in range(5))
            + (f"{PY} problems.bench_mouth_basin --table --out reports/registration/mouth_basin",),
            data=("ict",), script="problems/bench_mouth_basin.py"),
+    Recipe("registration-rigid", "The rigid stage without landmarks (search_similarity: orientation search, one-sided "
+           "refinement, perturbed restarts; then refine_point_to_plane) on whole-head and face-only scans of ICT "
+           "identities at neutral, jawOpen, mouthSmile_L, mouthPucker, seeds 0-2: rotation and translation errors, the "
+           "pose check's fields, CPU; baseline trimesh.registration.icp from the centroids and RMS radii",
+           ("registration/rigid/rigid.csv", "registration/rigid/rigid.md"),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_rigid --seeds 0 1 2 --cuts head face --out reports/registration/rigid",),
+           data=("ict",), script="problems/bench_rigid.py"),
     Recipe("registration-rig-unseen", "The registered neutral's vertices without scan surface (the mouth and eye "
            "sockets, holes) set by the modes plus the seen detail's extension in 3D (the default; eq. U1 of "
            "geometry/unseen.py), seeds 0 and 1, persons with detail outside the identity space and in it; baseline: "

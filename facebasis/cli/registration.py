@@ -47,6 +47,8 @@ def cmd_register(args) -> int:
                                **({} if args.expression_scan_pairs is None else
                                   {"expression_fit": dataclasses.replace(RegistrationOptions().expression_fit,
                                                                          scan_pairs=args.expression_scan_pairs)}),
+                               **({} if args.expression_pairs_schedule is None else
+                                  {"expression_pairs_schedule": args.expression_pairs_schedule}),
                                expression_regions=RegionOptions(
                                    count=RegionOptions.count if args.expression_regions is None else args.expression_regions),
                                detail=DetailPriorOptions(modes=0 if args.detail_prior == "off" else DetailPriorOptions.modes
@@ -108,6 +110,11 @@ def register(subparsers) -> None:
                    help="the expression fit also pairs N scan vertices with their nearest model vertex (default "
                         "5000): a model part over a hole of the scan then meets the scan points it should cover "
                         "(an opened mouth was fitted as lips closed over the mouth hole); 0: model-to-scan pairs only")
+    p.add_argument("--expression-pairs-schedule", default=None, action=Once, choices=("after", "joint"),
+                   help="when those scan pairs join the expression fit: after (default) a fit without them, continued "
+                        "with them, keeping the one that leaves less of the scan unexplained (the pairs from the first "
+                        "round rolled a lip in or half closed the lips on scans the fit without them got right); "
+                        "joint: from the first round")
     p.add_argument("--detail-prior", default=None, action=Once, choices=("on", "off"),
                    help="the identity fit also fits a smooth field along the normals beside the modes (default on): "
                         "what the identity space cannot express is left to that field instead of sliding the "

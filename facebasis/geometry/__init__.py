@@ -27,6 +27,7 @@ registration  scans of any topology to meshes in the template's topology (rigid 
 registerfiles  registering scan files: inputs checked before any work, outputs written atomically
 shapemodel  identity and expression bases: fitting a scan in a linear shape space (pose + bounded coefficients)
 scanpairs   scan-to-model pairs of the model fits (a model part over a scan's hole, e.g. lips closed over a mouth)
+pairschedule  when the expression fit's scan pairs join it (after a one-sided fit) and which fit is kept (eq. S2)
 expressionregions  one expression weight per soft region (a person's expression whose strength varies over the face)
 normalstage  offsets along a fitted model's normals only (after a shape-model fit: a detail stage that cannot slide)
 detailprior  the identity fit with a smooth normal field outside the space (a Gaussian-process prior, manifold harmonics)

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import parameter_error
+from .pairschedule import whole_expression_fit
 from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
 
 
@@ -141,8 +142,8 @@ def soft_regions(V: np.ndarray, deltas: np.ndarray, count: int, width: float = 0
 
 def expression_fit(base: np.ndarray, expressions: np.ndarray, surface, normals_of, h: float, options, use=None,
                    basis=None) -> tuple[ModelFit, str, tuple]:
-    """The expression stage of a registration: the whole-expression fit (:func:`.shapemodel.fit_shape_model`,
-    weights in ``[0, options.expression_max]``), then, with ``options.expression_regions.count`` regions,
+    """The expression stage of a registration: the whole-expression fit (:func:`.pairschedule.whole_expression_fit`,
+    weights in ``[0, options.expression_max]``; the scan pairs joining by ``options.expression_pairs_schedule``), then, with ``options.expression_regions.count`` regions,
     :func:`fit_regional_expressions` over :func:`soft_regions` of ``base`` (the person's neutral).
 
     Parameters
@@ -158,7 +159,8 @@ def expression_fit(base: np.ndarray, expressions: np.ndarray, surface, normals_o
     (fit, ``"expressions"``, the K weights' names)
     """
     top, reg = options.expression_max, options.expression_regions
-    fit = fit_shape_model(base, expressions, surface, normals_of, h, options.expression_fit, bounds=(0.0, top), use=use)
+    fit = whole_expression_fit(base, expressions, surface, normals_of, h, options.expression_fit, (0.0, top), use,
+                               options.expression_pairs_schedule)[0]
     if reg.count:
         regions = soft_regions(base, expressions, reg.count, reg.width, reg.support, use)
         fit = fit_regional_expressions(fit, expressions, regions, surface, normals_of, h, reg, top, use)[0]

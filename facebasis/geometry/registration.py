@@ -4,16 +4,13 @@ Per scan: a similarity alignment (:mod:`.rigid`; from landmarks when given, else
 candidate orientations plus trimmed ICP with scale); with a shape model (:mod:`.shapemodel`) a fit
 in it first: a neutral scan within the template's identity space, an expression scan as the
 person's registered neutral plus the template's expressions transferred to the person (weights
-bounded); then non-rigid ICP with a stiffness schedule (:mod:`.nricp`; Amberg et al. 2007's optimal-step loop
-with a rotation-aware stiffness term: local similarities from the template, since two faces differ in local size;
+bounded); then non-rigid ICP with a stiffness schedule (:mod:`.nricp`; Amberg et al. 2007's optimal-step loop with a rotation-aware stiffness term: local similarities from the template, since two faces differ in local size;
 local rotations from a person's registered neutral). From a registered neutral the alignment is rigid (no scale: same
 person, same scanner). The work happens in the start mesh's frame and units; the result is mapped
-back onto the scan. Landmarks may be given (indices or points) or found on the scan
-(``"auto"``, :mod:`.scanlandmarks`).
+back onto the scan. Landmarks may be given (indices or points) or found on the scan (``"auto"``, :mod:`.scanlandmarks`).
 
 :class:`Registration` holds what depends only on the template (edges, Laplacian, incidence,
-landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a
-person's expressions, register the neutral scan first, then each expression with
+landmarks) and registers any number of scans; :func:`register_scan` is the one-off form. For a person's expressions, register the neutral scan first, then each expression with
 ``start=<registered neutral>``: every expression then starts from the person's own neutral, so a vertex index
 means the same point of the face across the set. :func:`.registerfiles.register_files` does this for files and
 writes ``<stem>.obj`` and ``<stem>.json`` (the report) per scan, atomically.
@@ -38,6 +35,7 @@ from .mesh import connected_components, median_edge_length, validate_mesh
 from .nricp import NonRigidICP, NricpOptions, ScanSurface
 from .detailprior import DetailPriorOptions, detail_report, identity_fit_with_detail
 from .normalstage import NormalStageOptions, normal_displacement
+from .pairschedule import check_schedule
 from .rigid import RigidOptions, Similarity, refine_point_to_plane, search_similarity, umeyama
 from .shapemodel import ModelFit, ModelFitOptions, ShapeBasis, fit_shape_model
 from .unseen import extend_unseen
@@ -65,6 +63,8 @@ class RegistrationOptions:
         has an identity basis; ``detail``: its prior on detail outside the space (:mod:`.detailprior`)
     expression_fit : the expression fit of an expression scan, when expressions are given (``scan_pairs``: with
         scan-to-model pairs, eq. S1 of :mod:`.scanpairs`: an opened mouth is not fitted as lips closed over its hole)
+    expression_pairs_schedule : when those pairs join the fit (:mod:`.pairschedule`): ``"after"`` (the default: a
+        one-sided fit first, then continued with them; the one that explains more of the scan, eq. S2) or ``"joint"``
     nricp_after_model : the non-rigid stage after either fit (from the fitted mesh: local rotations)
     after_model : the stage after either fit: ``"normal"`` (the default: offsets along the fitted
         model's normals only, :mod:`.normalstage`: cannot slide), ``"nricp"`` (free non-rigid ICP,
@@ -85,6 +85,7 @@ class RegistrationOptions:
     identity_fit: ModelFitOptions = field(default_factory=ModelFitOptions)
     expression_fit: ModelFitOptions = field(default_factory=lambda: ModelFitOptions(scale=False, prior=1e-4,
                                                                                     prior_start=1e-2, scan_pairs=5000))
+    expression_pairs_schedule: str = "after"
     nricp_after_model: NricpOptions = field(default_factory=NricpOptions)
     expression_max: float = 1.5
     auto_landmark_weight: float = 0.1
@@ -94,6 +95,7 @@ class RegistrationOptions:
     detail: DetailPriorOptions = field(default_factory=DetailPriorOptions)
 
     def __post_init__(self):
+        check_schedule(self.expression_pairs_schedule)
         if self.after_model not in AFTER_MODEL:
             raise InputError(f"after_model: expected one of {', '.join(AFTER_MODEL)}, found {self.after_model!r}")
 
@@ -116,8 +118,7 @@ class RegistrationResult:
     model : the identity or expression fit before the non-rigid stage (None without a basis)
     model_kind : ``"identity"``, ``"expressions"`` or None
     model_names : the basis meshes' names (for the report)
-    landmarks_found : with landmarks found on the scan (``"auto"``): (found on both the scan and the
-        template, used: within 2 edge lengths of the mesh before the non-rigid stage); None otherwise
+    landmarks_found : with landmarks found on the scan (``"auto"``): (found on both the scan and the template, used: within 2 edge lengths of the mesh before the non-rigid stage); None otherwise
     """
 
     vertices: np.ndarray
@@ -254,8 +255,7 @@ class Registration:
             if basis is not None and basis.deltas.shape[1:] != self.V.shape:
                 raise InputError(f"{what} {basis.source}: expected displacements of shape (K, {len(self.V)}, 3) as "
                                  f"{name}, found {basis.deltas.shape}")
-        self.identity, self.expressions = identity, expressions
-        self.auto = None
+        self.identity, self.expressions, self.auto = identity, expressions, None
         if detector is not None:  # landmarks found on scans: the template's own, found once
             from .scanlandmarks import AutoLandmarks
 

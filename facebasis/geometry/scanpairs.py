@@ -26,7 +26,9 @@ Measured (``problems.bench_mouth_basin``, reports/registration/mouth_basin: 9 mo
 0-4, with and without out-of-space detail): 9 of 90 scans over median 0.05 / p95 0.2 cm with the model-to-scan
 pairs alone, 2 with 5000 scan pairs (1000 left seed 3's jawOpen 0.5 in the basin; 2000-10000 gave the same). Those
 2 were within the targets before: the term opens other basins there (a lower lip rolled in, mouthRollLower 1.5, on
-seed 0 detail jawOpen 0.7: p95 0.062 -> 0.323; lips half open on seed 4 in-space mouthClose: 0.042 -> 0.488).
+seed 0 detail jawOpen 0.7: p95 0.062 -> 0.323; lips half open on seed 4 in-space mouthClose: 0.042 -> 0.488). The
+registration's expression fit therefore adds the pairs after a one-sided fit, continued from it, and keeps the fit
+that leaves less of the scan unexplained (:mod:`.pairschedule`, eq. S2).
 
 References
 ----------

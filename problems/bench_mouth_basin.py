@@ -220,6 +220,8 @@ def main(argv=None):
     ap.add_argument("--out", default="reports/registration/mouth_basin")
     ap.add_argument("--table", action="store_true", help="only write mouth_basin.md from the seed*.csv files")
     args = ap.parse_args(argv)
+    if any(v < 0 for v in args.scan_pairs):  # before any person is built
+        ap.error(f"--scan-pairs: expected integers >= 0, found {args.scan_pairs}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.table:

@@ -166,6 +166,11 @@ class ScanSurface:
         vn = _unit(inc @ fn)
         self.vertex_normals = _unit(inc @ _unit(vn[F].sum(1)) + 1e-12 * vn)
 
+    @property
+    def used(self) -> np.ndarray:
+        """(u,) the scan vertices that are a corner of some triangle (the tree's points, in order)."""
+        return self._used
+
     def moved(self, V: np.ndarray) -> "ScanSurface":
         """The same scan topology at new vertex positions ``V`` (N, 3), e.g. mapped by a similarity;
         the topology tables are shared, the tree and normals rebuilt."""

@@ -9,18 +9,29 @@ model-to-scan pairs all land on the hole's rim and are dropped, while the scan's
 lower, pair with nothing). The reverse pairs see it: every scan point has a counterpart on the model,
 so scan vertices pull their nearest model vertices,
 
-    E_S = (1/p) sum_j (m_j . (x_i(j) - q_j))^2,   i(j) = argmin_i |x_i - q_j|             (eq. S1)
+    E = (1/(k + p)) [ sum_k (n_k . (x_k - y_k))^2 + sum_j (m_j . (x_i(j) - q_j))^2 ],
+    i(j) = argmin_i |x_i - q_j|                                                            (eq. S1)
 
-with ``q_j, m_j`` a scan vertex and its normal, ``x_i`` the model's vertices that may pair; the pairs
-join the model-to-scan ones in the same least squares (same Jacobian rows, the model vertex ``i(j)``),
-the point-to-plane residual measured along the scan's normal (Chen & Medioni 1992). This is the
-symmetric closest-point term of symmetric ICP (e.g. the two-sided data term of Amberg et al. 2007's
-discussion, or Rusinkiewicz 2019's symmetric objective), on a sample of the scan.
+with ``q_j, m_j`` a scan vertex and its normal, ``x_i`` the model's vertices that may pair, and the first
+sum the fit's k model-to-scan pairs: the p pairs join them in the same least squares (same Jacobian rows,
+the model vertex ``i(j)``) under one normalisation, so switching them on lowers the model-to-scan pairs'
+share; the point-to-plane residual is measured along the scan's normal (Chen & Medioni 1992). It is a
+bidirectional (Chamfer-type) closest-point term on a sample of the scan, not Rusinkiewicz's (2019)
+symmetric objective (one set of pairs, residuals along the sum of both normals).
 
-Pairs are kept when the two normals agree (the fit's ``normal_angle``) and the distance is within
-``max_distance`` edge lengths; not trimmed at a few times the median as the model-to-scan pairs are:
-a scan point is never an outlier for want of a counterpart (the scan shows less than the model),
-and the pairs a few millimetres off are the ones that carry the signal.
+Pairs are kept when the two normals agree (the fit's ``normal_angle``), the distance is within
+``max_distance`` edge lengths, and the scan point is the model vertex's own counterpart,
+
+    |x_i(j) - q_j|  <=  d_i + SLACK h,   or   d_i > SLACK h with d_i's scan vertex on a rim     (eq. S3)
+
+with ``d_i`` the distance from ``x_i(j)`` to its nearest scan vertex: a scan point farther from the vertex
+than the scan surface the vertex already lies on is a layer the model lacks (a fringe of hair, a cap's
+brim, a collar) and would pull the model towards it; a vertex over a hole (its nearest scan vertex on the
+hole's rim, farther than the slack) is exactly what the pairs are for. Not trimmed at a few times the
+median as the model-to-scan pairs are: the pairs a few millimetres off are the ones that carry the signal.
+Measured on the tiny rig of ``tests/geometry/test_scanpairs.py`` with the forehead copied 0.5-1 cm in front
+of it: without eq. S3 browInnerUp 1.1-1.5 and face p95 0.03-0.06, or (through eq. S2's choice) an opened
+mouth left half closed; with it the scan's own face decides (p95 <= 0.001).
 
 Measured (``problems.bench_mouth_basin``, reports/registration/mouth_basin: 9 mouth scans x ICT persons of seeds
 0-4, with and without out-of-space detail): 9 of 90 scans over median 0.05 / p95 0.2 cm with the model-to-scan
@@ -42,6 +53,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: eq. S3's slack, in the model's edge lengths: a scan point's distance to its model vertex may exceed that
+#: vertex's own distance to the scan by this much (the vertices' spacing, noise; 1 let a layer 1.7 edge lengths
+#: in front through on the tiny rig)
+SLACK = 0.5
+
 
 class ScanToModel:
     """A seeded sample of scan vertices, paired each round with the nearest model vertex (eq. S1).
@@ -56,7 +72,7 @@ class ScanToModel:
     """
 
     def __init__(self, surface, use: np.ndarray, options, h: float):
-        pool = surface._used
+        pool = surface.used
         rng = np.random.default_rng(options.seed + 1)
         pick = pool if len(pool) <= options.scan_pairs else np.sort(
             rng.choice(pool, options.scan_pairs, replace=False))
@@ -64,6 +80,7 @@ class ScanToModel:
         self.use = np.asarray(use)
         self.dmax = options.max_distance * h
         self.cos_max = np.cos(np.radians(options.normal_angle))
+        self.surface, self.slack = surface, SLACK * h
 
     def pairs(self, X: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(model vertex indices, scan points, scan normals)`` of the kept pairs, for the model at ``X``
@@ -72,4 +89,11 @@ class ScanToModel:
         far = ~np.isfinite(dist)
         i = self.use[np.where(far, 0, j)]
         ok = ~far & ((normals[i] * self.N).sum(1) >= self.cos_max)
-        return i[ok], self.Q[ok], self.N[ok]
+        i, dist = i[ok], dist[ok]
+        # eq. S3: a scan point pulls its model vertex only where the scan has nothing nearer that vertex, or
+        # only a rim farther than the slack (the vertex lies over a hole); else the point is on a layer the
+        # model lacks (hair, a cap) in front of surface the vertex already lies on
+        own, k = self.surface.tree.query(X[i])
+        over_hole = self.surface.rim_vertex[self.surface.used[k]] & (own > self.slack)
+        mutual = (dist <= own + self.slack) | over_hole
+        return i[mutual], self.Q[ok][mutual], self.N[ok][mutual]

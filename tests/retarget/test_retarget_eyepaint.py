@@ -107,3 +107,28 @@ def test_grey_and_alpha_images():
     paint_eye(out, rgba, closed, EYE, cols)
     changed = np.any(out[..., :3] != rgba[..., :3], -1)
     assert changed.any() and np.all(out[changed, 3] > 100)
+
+
+def test_the_cartoon_warp_paints_only_a_closing_eye_and_leaves_a_still_capture_as_drawn():
+    """CartoonAnimator: a capture that does not move gives the image back byte for byte (no lid drawn); one
+    that closes the right eye changes, against the bare warp, only pixels around that eye."""
+    from scipy.spatial import Delaunay
+
+    from facebasis.defaults.cartoon import default_cartoon
+    from facebasis.retarget.raster2d import warp_image
+    from facebasis.retarget.warp2d import CartoonAnimator
+
+    face = default_cartoon(128)
+    lm = np.array(face.landmarks, float)
+    anim = CartoonAnimator(np.array(face.image), lm, lm, lm, Delaunay(lm).simplices, fold_free=False)
+    np.testing.assert_array_equal(anim.frame(lm), face.image)
+    shut = lm.copy()
+    shut[36:42] = _closed(lm[36:42], 0.7)
+    V = anim.mesh(shut)
+    painted = anim.warp(V)
+    bare = warp_image(anim.image, anim.warp_rest, np.concatenate([V, anim.ring]), anim.draw_faces)
+    yy, xx = np.nonzero(np.any(painted != bare, -1))
+    assert len(yy) > 5
+    w = np.linalg.norm(lm[39] - lm[36])
+    centre = lm[36:42].mean(0)
+    assert np.abs(xx - centre[0]).max() <= 0.6 * w + 2 and np.abs(yy - centre[1]).max() <= 0.5 * w + 2

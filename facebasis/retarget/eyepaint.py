@@ -14,7 +14,8 @@ target's own (:func:`eye_closure`):
 * the *open eye* is the target's rest eye carried into the frame's eye frame (a similarity from
   corner to corner): its upper and lower lid curves (piecewise linear in ``u`` through the lid landmarks);
 * inside it, above the frame's upper lid, the lid: the target's own lid colour (:func:`eye_colours`,
-  the median of the skin just above the rest eye); below the frame's lower lid, the lower lid's skin;
+  the median of the skin just above the rest eye), reaching :data:`LID_MARGIN` eye widths above the rest
+  upper lid so that a painting's lid stroke, drawn above the landmarks, comes down with it; below the frame's lower lid, the lower lid's skin;
   between them, the target's own open eye unsquashed (sampled through the same similarity), so the
   lids cut the iris instead of squashing it;
 * along the frame's upper lid, the lash line: the darkest colour of the target's own eye, ``LASH_WIDTH``
@@ -24,6 +25,15 @@ Every edge is a linear ramp one pixel wide and the whole is blended with an opac
 closure (``clip(c / CLOSURE_FULL, 0, 1)``), so that an eye at rest, or opening wider than the target's,
 is left byte-identical; only pixels inside the open eye's anti-aliased outline (grown by the lash line)
 change. Vectorised over the eye's bounding box.
+
+Measured (``problems/cartoon_readback.py``'s eye ramp, both lids closing to the warp's contact gap, read
+back on the 9 frames; gain of the reading against the warped opening, bare warp -> painted lid; the lid
+margin 0 / 0.1 / 0.2 eye widths compared): dlib 0.13 -> 0.28 and MediaPipe 0.22 -> 0.52 on the painted
+astronaut, dlib 0.05 -> 0.28 and MediaPipe -0.14 -> 0.06 on the turned cameraman, 0.67 -> 0.92 / 0.65 -> 0.66
+on the astronaut photograph, 0.66 -> 0.76 / 0.59 -> 0.59 on the built-in cartoon (margin 0.1, the largest
+sum of gains of the three). Drawing the lids shut once the warp reaches its contact gap (where the capture's
+lids meet) was tried: MediaPipe then read the cartoon's closing better (0.59 -> 0.68) but dlib read a shut
+cartoon eye as open again (r 0.99 -> 0.64), so the lids stop where the landmarks are.
 """
 
 from __future__ import annotations
@@ -58,10 +68,11 @@ def eye_frame(eye):
     return P[0], e, n, w
 
 
-def lid_curves(eye, u):
+def lid_curves(eye, u, frame=None):
     """Upper and lower lid offsets ``v`` (eye widths, along the normal) of an eye (6, 2) at positions
-    ``u`` (any shape, eye widths from the first corner): piecewise linear through the lid landmarks."""
-    o, e, n, w = eye_frame(eye)
+    ``u`` (any shape, eye widths from the first corner): piecewise linear through the lid landmarks
+    (``frame``: the eye's :func:`eye_frame`, when already known)."""
+    o, e, n, w = eye_frame(eye) if frame is None else frame
     rel = (np.asarray(eye, np.float64) - o) / w
     pu, pv = rel @ e, rel @ n
     up_u, up_v = np.maximum.accumulate(pu[[0, 1, 2, 3]]), pv[[0, 1, 2, 3]]
@@ -127,10 +138,10 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
     if alpha * 255.0 < 1.0:
         return
     lid, under, lash = colours
-    o, e, n, w = eye_frame(eye)
-    ro, re_, rn, rw = eye_frame(rest_eye)
+    o, e, n, w = frame = eye_frame(eye)
+    ro, re_, rn, rw = rest_frame = eye_frame(rest_eye)
     ks = np.linspace(0.0, 1.0, 17)
-    up_r, lo_r = lid_curves(rest_eye, ks)
+    up_r, lo_r = lid_curves(rest_eye, ks, rest_frame)
     lash_w = max(LASH_WIDTH, 1.0 / w)
     outline = np.concatenate([o + w * (ks[:, None] * e + (up_r - lash_w - LID_MARGIN)[:, None] * n),
                               (o + w * (ks[:, None] * e + lo_r[:, None] * n))[::-1]])
@@ -148,8 +159,8 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
         return
     dx, dy = xs + x0 - o[0], ys + y0 - o[1]
     u, v = (dx * e[0] + dy * e[1]) / w, (dx * n[0] + dy * n[1]) / w
-    up_t, lo_t = lid_curves(eye, u)
-    up_o, lo_o = lid_curves(rest_eye, u)
+    up_t, lo_t = lid_curves(eye, u, frame)
+    up_o, lo_o = lid_curves(rest_eye, u, rest_frame)
     up_t, lo_t = np.maximum(up_t, up_o), np.minimum(lo_t, lo_o)   # never wider than the open eye
     a_top = np.clip((v - (up_o - LID_MARGIN)) * w + 0.5, 0.0, 1.0)[:, None]
     # the open eye unsquashed: the source's pixel at the same eye coordinates
@@ -178,5 +189,5 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
     box[ys, xs] = np.clip(np.rint(box[ys, xs].astype(np.float32) * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
 
 
-__all__ = ["EYES_68", "CLOSURE_FULL", "LASH_WIDTH", "LID_BAND", "eye_frame", "lid_curves", "eye_opening",
+__all__ = ["EYES_68", "CLOSURE_FULL", "LASH_WIDTH", "LID_MARGIN", "LID_BAND", "eye_frame", "lid_curves", "eye_opening",
            "eye_closure", "eye_colours", "paint_eye"]

@@ -422,6 +422,12 @@ RECIPES: tuple[Recipe, ...] = (
            ("reproduction/cartoon_readback.csv", "reproduction/cartoon_readback.md"),
            (f"{PY} problems.cartoon_readback --readers dlib,mediapipe --out reports/reproduction",),
            data=("detect", "mediapipe"), script="problems/cartoon_readback.py"),
+    Recipe("readback-variants", "What a detector needs to read a closing eye and a raised brow: the eye and brow "
+           "read-back ramps drawn as the bare warp, with the painted lid, with a dark brow stroke, read by dlib and "
+           "MediaPipe",
+           ("reproduction/readback_variants.csv", "reproduction/readback_variants.md"),
+           (f"{PY} problems.readback_variants --readers dlib,mediapipe --out reports/reproduction",),
+           data=("detect", "mediapipe"), script="problems/readback_variants.py"),
     Recipe("cartoon-expression-check", "dlib's reading of the animated cartoon's expression against the source",
            ("reproduction/cartoon_expression_check.csv",), (), data=("video", "detect"),
            script="problems/bench_cartoon.py",

@@ -423,6 +423,18 @@ RECIPES: tuple[Recipe, ...] = (
                        "cp {tmp}/expression/bench_cartoon.csv reports/reproduction/cartoon_expression.csv",
                        "cp {tmp}/expression/bench_cartoon.md reports/reproduction/cartoon_expression.md"),
            data=("video", "detect", "mediapipe"), script="problems/bench_cartoon.py"),
+    Recipe("cartoon-expression-photos", "The expression check on the photographs and the painting only (astronaut, "
+           "its painting, the cameraman; still mode), the four captures: the cartoon-expression table's rows a "
+           "painting check reads, in a fifth of its time",
+           ("reproduction/cartoon_expression_photos.csv", "reproduction/cartoon_expression_photos.md"),
+           CAPTURES + TRACKED + (f"{PY} problems.bench_cartoon {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
+                                 "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --modes still "
+                                 "--images astronaut,astronaut-painted,cameraman "
+                                 "--readers dlib,mediapipe --check-every 10 --mp-every 2 --warp-every 20 "
+                                 "--out {tmp}/photos",
+                                 "cp {tmp}/photos/bench_cartoon.csv reports/reproduction/cartoon_expression_photos.csv",
+                                 "cp {tmp}/photos/bench_cartoon.md reports/reproduction/cartoon_expression_photos.md"),
+           data=("video", "detect", "mediapipe"), script="problems/bench_cartoon.py"),
     Recipe("capture-features", "The dlib and tracking-only captures' expression measures against dlib and "
            "MediaPipe on the source video, per quarter of each take: what the painting check can reach",
            ("reproduction/capture_features.csv", "reproduction/capture_features.md"),
@@ -435,6 +447,12 @@ RECIPES: tuple[Recipe, ...] = (
            ("reproduction/cartoon_readback.csv", "reproduction/cartoon_readback.md"),
            (f"{PY} problems.cartoon_readback --readers dlib,mediapipe --out reports/reproduction",),
            data=("detect", "mediapipe"), script="problems/cartoon_readback.py"),
+    Recipe("readback-variants", "What a detector needs to read a closing eye and a raised brow: the eye and brow "
+           "read-back ramps drawn as the bare warp, with the painted lid, with a dark brow stroke, read by dlib and "
+           "MediaPipe",
+           ("reproduction/readback_variants.csv", "reproduction/readback_variants.md"),
+           (f"{PY} problems.readback_variants --readers dlib,mediapipe --out reports/reproduction",),
+           data=("detect", "mediapipe"), script="problems/readback_variants.py"),
     Recipe("cartoon-expression-check", "dlib's reading of the animated cartoon's expression against the source",
            ("reproduction/cartoon_expression_check.csv",), (), data=("video", "detect"),
            script="problems/bench_cartoon.py",

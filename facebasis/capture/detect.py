@@ -54,8 +54,10 @@ MEDIAPIPE_TO_IBUG68: np.ndarray = np.array([
     382, 385, 387, 249, 373, 380,
     # outer lip 48-59: right corner, upper lip to the left corner (54), lower lip back
     61, 39, 37, 0, 267, 304, 291, 405, 314, 17, 84, 181,
-    # inner lip 60-67: right corner, upper inner lip, left corner (64), lower inner lip
-    77, 82, 13, 312, 307, 317, 14, 87,
+    # inner lip 60-67: right corner, upper inner lip, left corner (64), lower inner lip; the corners are the
+    # face mesh's inner-lip corners (78, 308: where its upper and lower inner-lip chains meet,
+    # FACEMESH_LIPS), not the nearest-to-dlib vertices 77/307, which lie off the inner-lip ring
+    78, 82, 13, 312, 308, 317, 14, 87,
 ], np.int64)
 
 

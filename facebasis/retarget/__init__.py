@@ -17,6 +17,7 @@ warp2d     a cartoon image animated by the capture (:class:`CartoonAnimator`)
 raster2d   the vectorised piecewise-affine image warp (scanline rasteriser, ``cv2.remap``)
 mouth2d    the mouth of the cartoon warp: how open it is drawn (opacity), the inner-lip strip of a cut mesh
 mouthpaint an open mouth painted as a mouth: upper teeth, a cavity darkest at the back, the tongue
+eyepaint   a closing eye painted as a lid coming down over it, with a lash line at its edge
 foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
 featurescale eq. 12 per feature: each eye and the mouth moved in the target's own proportions

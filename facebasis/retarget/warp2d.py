@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from .mouth2d import INNER_LIP_68, MOUTH_INTERIOR_RGB, MOUTH_STRIP_68, fill_mouth, mouth_is_cut, opening_opacity
+from .eyepaint import EYES_68, eye_colours, paint_eye
 from .mouthpaint import image_chroma, paint_mouth
 from .raster2d import warp_image
 from .rbf import edge_length_ratio, fit_rbf
@@ -253,6 +254,8 @@ class CartoonAnimator:
         # and with 68 landmarks the opening is painted as an open mouth (:mod:`.mouthpaint`)
         self.draws_mouth = L == 68
         self.mouth_chroma = image_chroma(self.image, self.rest[48:68]) if self.draws_mouth else 1.0
+        # the eyes' lid, lower-lid and lash colours, for the lids drawn over a closing eye (:mod:`.eyepaint`)
+        self.eye_colours = [eye_colours(self.image, self.rest[i]) for i in EYES_68] if self.draws_mouth else []
         self.draw_faces = np.concatenate([self.warp_faces, MOUTH_STRIP_68]) if self.mouth_cut else self.warp_faces
         self.fold_free = bool(fold_free)
         self.solver = None
@@ -344,12 +347,16 @@ class CartoonAnimator:
         painting driven open shows an open mouth, not
         stretched lips; the target at rest is left as it is drawn); a capture mesh cut
         open along closed lips (:func:`mouth_is_cut`) is drawn with its inner-lip triangles
-        (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap."""
+        (:data:`.mouth2d.MOUTH_STRIP_68`) so that no still pixel shows through the gap. An eye more closed than
+        the target's own gets its upper lid drawn down over the unsquashed eye, with a lash line
+        (:func:`.eyepaint.paint_eye`)."""
         V = np.asarray(cartoon_vertices, np.float64)
         out = warp_image(self.image, self.warp_rest, np.concatenate([V, self.ring]), self.draw_faces)
         if self.draws_mouth:
             mouth = V[INNER_LIP_68]
             paint_mouth(out, mouth, opacity=opening_opacity(mouth, self.rest[INNER_LIP_68]), chroma=self.mouth_chroma)
+            for i, colours in zip(EYES_68, self.eye_colours):    # a closing eye: its lid drawn down over it
+                paint_eye(out, self.image, V[i], self.rest[i], colours)
         return out
 
     def frame_at(self, drive: CartoonDrive, t: int) -> np.ndarray:

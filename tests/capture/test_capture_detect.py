@@ -327,6 +327,29 @@ def test_mapping_table_is_68_distinct_face_mesh_points():
         mediapipe_to_ibug68(np.zeros((68, 2)))
 
 
+#: MediaPipe face-mesh inner-lip chains (FACEMESH_LIPS), from one inner corner to the other
+MP_INNER_UPPER = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308)
+MP_INNER_LOWER = (78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308)
+
+
+def test_mapping_inner_lips_lie_on_the_face_mesh_inner_lip_ring_with_its_corners():
+    """iBUG 60/64 are the inner mouth corners: the face mesh's inner-lip chains meet at 78 and 308
+    (77/307, the former entries, are on neither chain); 61-63 on the upper chain, 65-67 on the lower,
+    in the same order from the subject's right corner."""
+    t = MEDIAPIPE_TO_IBUG68
+    assert (t[60], t[64]) == (MP_INNER_UPPER[0], MP_INNER_UPPER[-1]) == (MP_INNER_LOWER[0], MP_INNER_LOWER[-1])
+    up = [MP_INNER_UPPER.index(i) for i in t[[60, 61, 62, 63, 64]]]
+    lo = [MP_INNER_LOWER.index(i) for i in t[[60, 67, 66, 65, 64]]]
+    assert up == sorted(up) and lo == sorted(lo)
+
+
+def test_inner_lip_chains_match_the_installed_mediapipe_topology():
+    conn = pytest.importorskip("mediapipe.python.solutions.face_mesh_connections")
+    edges = {frozenset(e) for e in conn.FACEMESH_LIPS}
+    for chain in (MP_INNER_UPPER, MP_INNER_LOWER):
+        assert all(frozenset(e) in edges for e in zip(chain[:-1], chain[1:]))
+
+
 @needs_mediapipe
 def test_mediapipe_mapping_on_the_generated_face():
     from facebasis.capture.detect import get_detector

@@ -27,7 +27,7 @@ a fixed size in rig units (*rig_noise*: ``noise_model="rig"``, the default befor
 model), with one noise for every landmark (*shared_points*: ``point_noise="shared"``, the default
 before the per-point noise model of :mod:`facebasis.retarget.pointnoise`) and, on request, with the former model altogether (*before*: the rest rule before the landmark
 evidence, the first frame's posture when it recurs and demands <= 1.25 times the commonest posture's
-negative weight, and ``noise_model="rig"``), and measured by the owner's metric (calm frames:
+negative weight, ``noise_model="rig"`` and no rest depth), and measured by the owner's metric (calm frames:
 landmarks within 1.5% of the face width of the cut's frame 0 after a similarity alignment; the
 median over them of the largest weight, target <= 0.15; over all frames the median of the largest
 left/right difference, target <= 0.2), with jawOpen on the calm frames and its correlation with the
@@ -54,7 +54,8 @@ MIN_FRAMES = 150
 LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
-VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared", "gaze": "free"}, False), "default": ({}, True),
+VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared", "gaze": "free", "rest_depth": "none"}, False),
+            "default": ({}, True),
             "previous": ({"rest_depth": "none"}, True), "free_gaze": ({"gaze": "free"}, True),
             "no_anchor": ({"rest_anchor": False}, True),
             "rig_noise": ({"noise_model": "rig"}, True),

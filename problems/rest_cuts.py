@@ -14,18 +14,20 @@ them, ``facebasis landmarks --detector dlib`` on the cut's first frame, then ``f
 when at least 150 frames long. The recipe (``python -m problems.reproduce rest-cuts``) cuts the detector
 captures (dlib and MediaPipe) every 8 s from 4 s (``--step 200 --first 100`` at 25 fps) plus the takes'
 starts (``--step 100000``), and the tracking-only captures every 8 s from 0, with the variants
-*shared_points*, *rig_noise* and *default*, merged into one table (the per-cut table compares
+*previous* and *default*, merged into one table (the per-cut table compares
 *default* with the first of them).
 
 Every cut's frame 0 is labelled at rest or not by landmarks alone (:func:`facebasis.retarget.reststart.rest_start`:
 the first 0.5 s held within the owner's 1.5% calm tolerance, lips closed against the capture's own
 closed-lip gap), independently of any weights, then retargeted onto ICT-FaceKit's 53 expressions
-(``../shared/data/ict``) with ``facebasis retarget``'s defaults (*default*), with the landmark noise of
+(``../shared/data/ict``) with ``facebasis retarget``'s defaults (*default*), with the rest face's offsets
+in-plane without depth (*previous*: ``rest_depth="none"``, the default before :mod:`facebasis.retarget.restdepth`),
+with each eye's look shapes on their own (*free_gaze*: ``gaze="free"``), with the landmark noise of
 a fixed size in rig units (*rig_noise*: ``noise_model="rig"``, the default before the pixel noise
 model), with one noise for every landmark (*shared_points*: ``point_noise="shared"``, the default
 before the per-point noise model of :mod:`facebasis.retarget.pointnoise`) and, on request, with the former model altogether (*before*: the rest rule before the landmark
 evidence, the first frame's posture when it recurs and demands <= 1.25 times the commonest posture's
-negative weight, and ``noise_model="rig"``), and measured by the owner's metric (calm frames:
+negative weight, ``noise_model="rig"`` and no rest depth), and measured by the owner's metric (calm frames:
 landmarks within 1.5% of the face width of the cut's frame 0 after a similarity alignment; the
 median over them of the largest weight, target <= 0.15; over all frames the median of the largest
 left/right difference, target <= 0.2), with jawOpen on the calm frames and its correlation with the
@@ -52,8 +54,9 @@ MIN_FRAMES = 150
 LABELS = ("rest", "not", "unknown")
 LABELS_TEXT = {"rest": "at rest", "not": "not at rest", "unknown": "no evidence"}
 #: variant -> (RigRetargeter keyword arguments, landmark evidence used)
-VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared", "gaze": "free"}, False), "default": ({}, True),
-            "previous": ({"gaze": "free"}, True),
+VARIANTS = {"before": ({"noise_model": "rig", "point_noise": "shared", "gaze": "free", "rest_depth": "none"}, False),
+            "default": ({}, True),
+            "previous": ({"rest_depth": "none"}, True), "free_gaze": ({"gaze": "free"}, True),
             "no_anchor": ({"rest_anchor": False}, True),
             "rig_noise": ({"noise_model": "rig"}, True),
             "shared_points": ({"point_noise": "shared"}, True)}

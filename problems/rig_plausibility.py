@@ -39,8 +39,9 @@ ROOT = Path(__file__).resolve().parents[1]
 #: variant name -> RigRetargeter keyword arguments (``default`` = the command's defaults)
 VARIANTS = {
     "before": {"identity": "quantile", "contour_slide": 1.0, "sparsity": 0.0, "noise_model": "rig",
-               "point_noise": "shared", "gaze": "free"},  # before issue 23
+               "point_noise": "shared", "gaze": "free", "rest_depth": "none"},  # before issue 23
     "free_gaze": {"gaze": "free"},                            # each eye's look shapes on their own
+    "flat_rest": {"rest_depth": "none"},                      # the rest face in-plane, without depth
     "default": {},
     "no_anchor": {"rest_anchor": False},                      # rest face: the commonest posture, never frame 0's
     "no_rest_face": {"identity": "quantile"},                 # identity: the quantile baseline only

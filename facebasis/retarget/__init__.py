@@ -33,6 +33,7 @@ calibrate  the person's neutral landmarks estimated from the capture (identity "
            returned, never applied to the solver it is given; the rest face at the take's start when allowed
 onesided   how much a candidate neutral makes a capture's frames demand negative weights (rest-face check)
 reststart  whether a take starts at rest, from its first frames' landmarks (still, lips closed)
+restdepth  the rest face's depth: each landmark's offset lifted onto the rig's skin (tangent plane)
 animation  GLB with morph targets and a glTF weight animation
 synthetic  synthetic captures with known weights and pose (tests, benchmark)
 preview    preview.mp4 (the source beside the rig or mesh rendered per frame) and weights.png

@@ -34,8 +34,8 @@ otherwise the rig's neutral stays (a capture of the rig's own face gives exactly
 ``identity="rig"``). Limits: an expression held through more than ``1 - BASELINE_QUANTILE`` of the
 capture is taken as the person's neutral; a face that differs from the rig's in the negative
 direction of a shape stays unexplained (the shape rests at 0 and the residual keeps the difference);
-the residual part has no depth, so it is exact for the head orientations of the pilot frames and
-approximate away from them.
+the residual part has no depth (exact for the head orientations of the pilot frames, approximate away
+from them; the rest face of :func:`calibrate_rest` has the skin's, :mod:`.restdepth`).
 
 Every calibration here takes a :class:`.framefit.FrameSolver` (frozen) and returns an
 :class:`IdentityCalibration` (frozen): the offset and the neutral landmarks it settled on. None of
@@ -52,6 +52,7 @@ import numpy as np
 from .framefit import FrameSolver
 from .onesided import demand_ratio
 from .pose import PI, fit_pose_affine
+from .restdepth import rest_offset
 
 #: pilot frames (evenly spaced) of the calibration
 CALIBRATION_FRAMES = 40
@@ -349,7 +350,8 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     expressions; expressions are excursions from it in many directions. Up to ``n_frames`` evenly
     spaced pilot frames are posed on ``solver.v0`` with all weights 0 (:func:`rest_offsets`), their
     landmark offsets from it compared, and the landmark-wise median of the densest ``share`` of them
-    (:func:`densest_frames`) is added to ``v0`` (in-plane, no depth); ``rounds`` times, each round
+    (:func:`densest_frames`) is added to ``v0`` (each frame's offset in the skin's tangent plane with
+    the solver's ``normals``, :func:`.restdepth.rest_offset`, else no depth); ``rounds`` times, each round
     posing on the updated neutral. Unlike the quantile baseline (:func:`calibrate_identity`), this
     needs no weights of the pilot frames, so landmark noise fitted by weak shapes cannot leak into
     the neutral, and the offset is not restricted to the shapes' span. ``solver`` is left as it is.
@@ -384,8 +386,7 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
     for _ in range(rounds):
         O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
         near, anchored = rest_frames(O, share, 0 if anchor else None, window=win)
-        off = np.nan_to_num(np.nanmedian(O[near], axis=0))
-        off[:, 2] = 0.0
+        off = rest_offset(O[near], np.array([poses[j][1] for j in near]), solver.normals)   # depth: restdepth.py
         moved = moved.shifted(off)
     after = _fitted_rms(moved, P, vis, check)
     if not after <= (1.0 - REST_MIN_GAIN) * before:

@@ -87,6 +87,8 @@ class FrameSolver:
         pilot fits, :meth:`.rigdrive.RigRetargeter.pilot_stats`)
     point_weights : None, or (L,) square-root weights of the landmarks' residuals in both steps (the
         per-point noise model, :mod:`.pointnoise`; on top of the contour's sliding)
+    normals : None, or (L, 3) unit normals of the rig's neutral at the landmark vertices: the rest face's
+        offsets get depth in their tangent plane (:mod:`.restdepth`); None: in-plane offsets, no depth
     tie : None, or (k, k) a Gaussian prior on differences of weights per unit ridge: the weight step adds
         ``ridge * tie`` to its Gram matrix (the conjugate gaze prior, :func:`.gaze.gaze_tie`)
     focal : the camera's focal length in pixels (inf: a weak-perspective camera, the model as it is);
@@ -109,6 +111,7 @@ class FrameSolver:
     pixel_scale: float | None = None
     point_weights: np.ndarray | None = None
     tie: np.ndarray | None = None
+    normals: np.ndarray | None = None
 
     @property
     def n_shapes(self) -> int:

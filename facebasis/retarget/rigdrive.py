@@ -79,6 +79,7 @@ from .observe import Identifiability, identifiability, landmark_jacobian
 from .gaze import GAZE_MODES, conjugate_gaze_pairs, gaze_tie
 from .pointnoise import POINT_NOISE_MODES, noise_floor, point_sigmas, point_weights
 from .reststart import rest_start
+from .restdepth import REST_DEPTH_MODES, landmark_normals
 from .rigoptions import DEFAULT_IDENTITY, IDENTITY_MODES, check_landmark_indices, resolve_identity, resolve_pairs
 from .pose import (
     PI,
@@ -224,6 +225,9 @@ class RigRetargeter:
         one noise for every landmark (the former model)
     gaze : "conjugate" (the default): the eyes look the same way, a Gaussian prior on the difference of
         each conjugate eye-look pair the rig has by name (:mod:`.gaze`); "free": no such prior
+    rest_depth : "tangent" (the default): the rest face's offsets get depth, each landmark's in the rig's
+        tangent plane at its vertex, so the rest face measured on a turned head holds as it turns back
+        (:mod:`.restdepth`); "none": in-plane offsets without depth (the former model)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,
@@ -232,7 +236,7 @@ class RigRetargeter:
                  contour="auto", contour_slide: float = CONTOUR_SLIDE,
                  sparsity: float = DEFAULT_SPARSITY, rest_anchor: bool = True,
                  focal: float | None = None, centre=None, noise_model: str = "pixels",
-                 point_noise: str = "per-point", gaze: str = "conjugate"):
+                 point_noise: str = "per-point", gaze: str = "conjugate", rest_depth: str = "tangent"):
         self.identity = resolve_identity(identity, first_frame_neutral)
         self.auto = isinstance(ridge, str)
         if self.auto:
@@ -275,6 +279,7 @@ class RigRetargeter:
         self.noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
         self.point_noise = parse_mode("point_noise", point_noise, POINT_NOISE_MODES, "per-point")
         self.gaze = parse_mode("gaze", gaze, GAZE_MODES, "conjugate")
+        self.rest_depth = parse_mode("rest_depth", rest_depth, REST_DEPTH_MODES, "tangent")
         self.gaze_pairs = conjugate_gaze_pairs(rig.names) if self.gaze == "conjugate" else np.zeros((0, 2), np.int64)
         ipopt = None
         if solver == "ipopt":
@@ -289,7 +294,8 @@ class RigRetargeter:
             pairs=self.pairs, smooth=self.smooth, ridge=self.ridge, sparsity=self.sparsity,
             contour=self.contour, contour_slide=self.contour_slide, alternations=self.alternations,
             tol=self.tol, ipopt=ipopt, focal=focal, centre=centre,
-            tie=gaze_tie(rig.n_shapes, self.gaze_pairs, PRIOR_STD))
+            tie=gaze_tie(rig.n_shapes, self.gaze_pairs, PRIOR_STD),
+            normals=landmark_normals(rig.neutral, rig.faces, self.indices) if self.rest_depth == "tangent" else None)
 
     @property
     def n_landmarks(self) -> int:

@@ -16,7 +16,11 @@ def test_before_variants_run_the_former_noise_model():
     assert rest_cuts.VARIANTS["before"][0]["point_noise"] == "shared"
     assert rest_cuts.VARIANTS["shared_points"][0] == {"point_noise": "shared"}
     assert rig_plausibility.VARIANTS["before"]["gaze"] == "free" and rest_cuts.VARIANTS["before"][0]["gaze"] == "free"
-    assert rest_cuts.VARIANTS["previous"] == ({"gaze": "free"}, True)         # this round's gaze prior undone
+    assert rest_cuts.VARIANTS["free_gaze"] == ({"gaze": "free"}, True)        # the gaze prior undone
+    assert rest_cuts.VARIANTS["previous"] == ({"rest_depth": "none"}, True)   # this round's rest depth undone
+    assert rig_plausibility.VARIANTS["before"]["rest_depth"] == "none" and rest_cuts.VARIANTS["before"][0]["rest_depth"] == "none"
+    assert rig_plausibility.VARIANTS["flat_rest"] == {"rest_depth": "none"}
+    assert inspect.signature(RigRetargeter).parameters["rest_depth"].default == "tangent"
     assert inspect.signature(RigRetargeter).parameters["noise_model"].default == "pixels"   # what "default" runs
     assert inspect.signature(RigRetargeter).parameters["gaze"].default == "conjugate"
 

@@ -11,8 +11,9 @@ Schedules of :func:`whole_expression_fit`:
     previous default)
 ``"after"``
     the model-to-scan fit first (its graduated prior finds the basin of the large motions), then the same fit
-    with the scan pairs continued from its weights, and of the two the one that leaves less of the scan
-    unexplained (eq. S2): a fit already right stays right, one with lips closed over a hole moves on.
+    with the scan pairs continued from its weights, and the continued fit kept only if it leaves clearly less
+    of the scan unexplained (eq. S2 below :data:`MARGIN` times the first's): a fit already right stays right,
+    one with lips closed over a hole moves on.
     On the two scans above the continued fit lands right (whole-fit p95 0.183 and 0.122 cm). Costs one
     whole fit more (about 1 s CPU on a 100k-vertex scan).
 
@@ -45,6 +46,11 @@ from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
 
 SCHEDULES = ("after", "joint")  #: values of :func:`whole_expression_fit`'s ``schedule``
 CAP = 2.0  #: eq. S2's residuals are capped at this many ``h``
+#: the continued fit is kept only if its eq. S2 is below this fraction of the one-sided fit's: between two right
+#: fits S2 differs by noise (it has a floor, pairs with model vertices, and the continued fit minimised it on a
+#: correlated sample; the bench's 15 kept fits with a worse face p95 differed by under 10 %), a wrong basin by
+#: 33-50 % (review of the bench, tiny-rig checks: the one-sided fit's weights 0.002 off, the continued 0.024)
+MARGIN = 0.9
 
 
 def check_schedule(schedule) -> str:
@@ -89,9 +95,10 @@ def whole_expression_fit(base: np.ndarray, expressions, surface, normals_of, h: 
                             bounds=bounds, use=use)
     then = fit_shape_model(base, expressions, surface, normals_of, h, options, bounds=bounds, use=use,
                            c0=first.coefficients)
-    # another seeded sample of the scan than the fit's pairs (seed + 2): not the points the continued fit minimised
+    # another seeded sample of the scan than the fit's pairs (seed + 2; the same points when the scan has no more
+    # vertices than scan_pairs: then the whole scan is both samples)
     pairs = ScanToModel(surface, np.arange(len(base)) if use is None else use, dataclasses.replace(options, seed=options.seed + 1), h)
     s2 = [scan_unexplained(f.vertices, normals_of(f.vertices), pairs, h) for f in (first, then)]
-    keep = 1 if s2[1] <= s2[0] else 0
+    keep = 1 if s2[1] < MARGIN * s2[0] else 0
     return (first, then)[keep], {"schedule": schedule, "s2": s2, "kept": ("one-sided", "continued")[keep],
                                  "fits": (first, then)}

@@ -18,7 +18,7 @@ from facebasis.errors import InputError
 from facebasis.geometry.mesh import median_edge_length
 from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.nricp import NonRigidICP, ScanSurface
-from facebasis.geometry.pairschedule import CAP, scan_unexplained, whole_expression_fit
+from facebasis.geometry.pairschedule import CAP, MARGIN, scan_unexplained, whole_expression_fit
 from facebasis.geometry.registration import Registration, RegistrationOptions
 from facebasis.geometry.scanpairs import ScanToModel
 from facebasis.geometry.shapemodel import ModelFitOptions, ShapeBasis
@@ -72,10 +72,13 @@ def test_after_keeps_the_fit_that_explains_more_of_the_scan(monkeypatch):
     assert w["jawOpen"] > 0.95 and w["jawOpenLipsClosed"] < 0.05 and p95 < 0.01, (w, p95)
     one_sided, continued = info["fits"]
     assert one_sided.coefficients[-1] > 0.3  # the first fit was in the closed-lips basin
-    # closed lips over an opened jaw: both fits right, either kept, the lips stay closed
+    # closed lips over an opened jaw: both fits right, eq. S2 within noise of each other, the one-sided fit kept
+    # (the continued one minimised S2 on a correlated sample: its weights drift, e.g. eyeWide_L by 0.05)
     w, p95, info = register({"jawOpenLipsClosed": 1.0}, "after", monkeypatch)
     assert w["jawOpenLipsClosed"] > 0.95 and w["jawOpen"] < 0.05 and p95 < 0.01, (w, p95)
-    assert info["kept"] == ("continued", "one-sided")[int(info["s2"][0] < info["s2"][1])]
+    assert info["s2"][1] > MARGIN * info["s2"][0] and info["kept"] == "one-sided", info["s2"]
+    others = [k for k in w if k != "jawOpenLipsClosed"]
+    assert max(abs(w[k]) for k in others) < 0.03, w
 
 
 @pytest.mark.parametrize("schedule, pairs, label", [("joint", 500, "joint"), ("after", 0, "one-sided")])

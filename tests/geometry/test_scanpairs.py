@@ -16,11 +16,14 @@ from functools import lru_cache
 import numpy as np
 import pytest
 from conftest import parser_refuses
+from scipy.spatial import cKDTree
 
 from facebasis.cli import main
 from facebasis.errors import InputError
 from facebasis.geometry.meshio import write_mesh
 from facebasis.geometry.registration import Registration, RegistrationOptions
+from facebasis.geometry.mesh import median_edge_length
+from facebasis.geometry.scanpairs import ScanToModel
 from facebasis.geometry.shapemodel import ModelFitOptions, ShapeBasis
 from test_shapemodel import as_scan, face
 
@@ -81,6 +84,24 @@ def test_a_layer_the_model_lacks_pulls_nothing(offset, jaw):
     assert w["browInnerUp"] < 0.05 and max(w["eyeWide_L"], w["eyeWide_R"]) < 0.1, w
     assert abs(w["jawOpen"] - jaw) < 0.05 and w["jawOpenLipsClosed"] < 0.05, w
     assert p95 < 0.01 and mx < 0.05, (p95, mx)
+
+
+def test_a_scan_denser_than_the_model_keeps_its_pairs_at_the_exact_fit():
+    """Eq. S3 compares offsets along the model's normal: the points of a midpoint-subdivided scan lying along
+    the skin between the model's vertices all pair at the exact fit (straight-line distances dropped 35 %)."""
+    import trimesh
+
+    from facebasis.geometry.nricp import NonRigidICP, ScanSurface
+
+    T, F, names, D, keep = ambiguous_rig()
+    S, G = trimesh.remesh.subdivide(T, F[keep[F].all(1)])
+    h = median_edge_length(T, F)
+    pairs = ScanToModel(ScanSurface(S, G), np.arange(len(T)), RegistrationOptions().expression_fit, h)
+    n = NonRigidICP(F, len(T)).vertex_normals(T)
+    free = pairs.pairs(T, n)[0]  # every pair eq. S3 lets through
+    dist, j = cKDTree(T).query(pairs.Q, distance_upper_bound=pairs.dmax)
+    agree = np.isfinite(dist) & ((n[np.where(np.isfinite(dist), j, 0)] * pairs.N).sum(1) >= pairs.cos_max)
+    assert agree.sum() == len(pairs.Q) == 5000 and len(free) >= 0.95 * agree.sum(), (len(free), agree.sum())
 
 
 def test_closed_lips_over_an_opened_jaw_stay_closed():

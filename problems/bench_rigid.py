@@ -96,7 +96,8 @@ def run(seeds, cuts=CUTS, scans=SCANS, log=print, write=None) -> list[dict]:
             if cut == "face":
                 keep = np.zeros(len(T), bool)
                 keep[face] = True
-            rng = np.random.default_rng(2000 + seed)  # the same motions for both cuts
+            rng = np.random.default_rng(2000 + seed)  # the same seed for both cuts; the cuts' vertex counts differ,
+            # so make_scan's draws (noise, shuffle, then the motion) give each cut its own motions: poses not paired
             ears = _ears(B0, head)
             for nm, Vt in shapes:
                 S, G, R, t = make_scan(Vt, F, keep, ears, rng)

@@ -56,7 +56,10 @@ def paint_brow_stroke(frame, brow, rest_brow, colour, iod) -> None:
                   cv2.LINE_AA, 4)
     ys, xs = np.nonzero(mask)
     al = (mask[ys, xs].astype(np.float32) * (a / 255.0))[:, None]
-    frame[ys, xs] = np.clip(np.rint(frame[ys, xs] * (1 - al) + colour * al), 0, 255).astype(np.uint8)
+    view = frame[..., None] if frame.ndim == 2 else frame  # a grey frame: (n, 1) pixels, not (n,) against (n, 1)
+    c = np.asarray(colour, np.float32)[:3]
+    c = c @ np.float32([0.299, 0.587, 0.114]) if view.shape[-1] == 1 else c
+    view[ys, xs] = np.clip(np.rint(view[ys, xs] * (1 - al) + c * al), 0, 255).astype(np.uint8)
 
 
 def variant_rows(name, image, landmarks, detector, reader: str, steps: int) -> list[dict]:

@@ -23,7 +23,7 @@ target's own (:func:`eye_closure`):
 
 Every edge is a linear ramp one pixel wide and the whole is blended with an opacity that grows with the
 closure (``clip(c / CLOSURE_FULL, 0, 1)``), so that an eye at rest, or opening wider than the target's,
-is left byte-identical; only pixels inside the open eye's anti-aliased outline (grown by the lash line)
+is left byte-identical; only pixels inside the open eye's anti-aliased outline (grown by the lash line and :data:`LID_MARGIN`)
 change. Vectorised over the eye's bounding box.
 
 Measured (``problems/cartoon_readback.py``'s eye ramp, both lids closing to the warp's contact gap, read
@@ -52,6 +52,9 @@ LID_MARGIN = 0.1
 #: the skin band sampled for the lid colour: this far above the rest upper lid, in eye widths
 LID_BAND = (0.12, 0.3)
 
+
+#: source pixels sampled per row of the remap maps (any width under 32767; a whole eye in few rows)
+REMAP_ROW = 4096
 
 def eye_frame(eye):
     """The frame of an eye (6, 2) (corner, upper lid 2, corner, lower lid 2): origin at the first
@@ -166,9 +169,13 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
     # the open eye unsquashed: the source's pixel at the same eye coordinates
     sx = (ro[0] + rw * (u * re_[0] + v * rn[0])).astype(np.float32)
     sy = (ro[1] + rw * (u * re_[1] + v * rn[1])).astype(np.float32)
-    src = cv2.remap(source, sx[:, None], sy[:, None], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    # the maps as rows of REMAP_ROW (cv2.remap needs each side under 32767: a (k, 1) map failed on eyes ~300 px wide)
+    rows = -(-len(sx) // REMAP_ROW)
+    pad = rows * REMAP_ROW - len(sx)
+    sx, sy = (np.pad(m, (0, pad), mode="edge").reshape(rows, REMAP_ROW) for m in (sx, sy))
+    src = cv2.remap(source, sx, sy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     C = image.shape[2] if image.ndim == 3 else 1
-    src = src.reshape(len(ys), -1).astype(np.float32)[:, :3]
+    src = src.reshape(rows * REMAP_ROW, -1)[: len(ys)].astype(np.float32)[:, :3]
     if src.shape[1] == 1:
         src = np.repeat(src, 3, 1)
     px = w                                               # pixels per eye width: 1 px ramps

@@ -132,3 +132,20 @@ def test_the_cartoon_warp_paints_only_a_closing_eye_and_leaves_a_still_capture_a
     w = np.linalg.norm(lm[39] - lm[36])
     centre = lm[36:42].mean(0)
     assert np.abs(xx - centre[0]).max() <= 0.6 * w + 2 and np.abs(yy - centre[1]).max() <= 0.5 * w + 2
+
+
+def test_an_eye_wider_than_the_remap_limit_is_painted():
+    """An eye 400 px wide (about 40 000 of its pixels sampled: cv2.remap refuses a map side of 32767 or more)
+    is painted as the 40 px one, scaled: the lid's colour above the closed lid, the iris unsquashed."""
+    import cv2
+
+    k = 10
+    img = cv2.resize(_face(), (80 * k, 80 * k), interpolation=cv2.INTER_NEAREST)
+    rest, closed = EYE * k, _closed(EYE, 0.7) * k
+    cols = eye_colours(img, rest)
+    out = img.copy()
+    paint_eye(out, img, closed, rest, cols)
+    lid_v, _ = lid_curves(_closed(EYE, 0.7), np.array([0.5]))
+    top = k * (40 + 40 * lid_v[0])
+    assert np.abs(out[int(top - 4.2 * k), 40 * k].astype(int) - np.asarray(cols[0])).max() <= 12
+    assert np.abs(out[40 * k, 40 * k].astype(int) - IRIS).max() <= 20

@@ -345,12 +345,22 @@ RECIPES: tuple[Recipe, ...] = (
                    f"--out reports/registration/round7_amp2_seed{s}" for s in (1, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-round8", "The rig bench with today's defaults (round 7's command without its pin to the "
-           "expression fit before its scan pairs: --expression-scan-pairs at the library's 5000, and the rigid stage's "
-           "one-sided refinement), both persons, seeds 0, 1, 2 and 3; baseline: registration-rig-round7",
+           "expression fit before its scan pairs: --expression-scan-pairs at the library's 5000, the rigid stage's "
+           "one-sided refinement, the detail field along the person's normals, eq. D4 of geometry/fieldnormals.py), "
+           "both persons, seeds 0, 1, 2 and 3; baselines: registration-rig-round8-template (the same code with the "
+           "field along the template's normals) and registration-rig-round7",
            tuple(f"registration/round8_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail in-space --train 12 "
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/round8_seed{s}" for s in (0, 1, 2, 3)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round8-template", "Baseline of registration-rig-round8: the same command with the detail "
+           "field along the template's normals (--detail-field-normals template, the code before eq. D4), seeds 1 and 3 "
+           "both persons, seed 2 the person with detail",
+           tuple(f"registration/round8_template_seed{s}/{f}" for s in (1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons "
+                 f"{'detail' if s == 2 else 'detail in-space'} --train 12 --no-baseline --fit-modes 100 --after-model "
+                 f"normal --regions 48 {TEMPLATE_NORMALS} --out reports/registration/round8_template_seed{s}" for s in (1, 2, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",

@@ -35,6 +35,9 @@ def cmd_register(args) -> int:
     if args.detail_amplitude is not None and args.detail_prior == "off":
         raise InputError(f"--detail-amplitude {args.detail_amplitude}: expected together with --detail-prior on (the "
                          "detail field's deviation), found --detail-prior off")
+    if args.detail_field_normals is not None and args.detail_prior == "off":
+        raise InputError(f"--detail-field-normals {args.detail_field_normals}: expected together with --detail-prior on "
+                         "(the detail field's directions), found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 
@@ -55,7 +58,9 @@ def cmd_register(args) -> int:
                                                          if args.detail_modes is None else args.detail_modes,
                                                          noise_prior=args.identity_prior != "fixed",
                                                          basis=args.detail_basis or DetailPriorOptions.basis,
-                                                         amplitude=_amplitude(args.detail_amplitude)))
+                                                         amplitude=_amplitude(args.detail_amplitude),
+                                                         field_normals=args.detail_field_normals
+                                                         or DetailPriorOptions.field_normals))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -136,6 +141,11 @@ def register(subparsers) -> None:
                         "A: A x the RMS normal offset the modes-only fit leaves (2: the previous default; also what "
                         "'auto' uses with --identity-prior fixed, and where the evidence cannot be evaluated: the "
                         "report's detail_field.chosen_by says which)")
+    p.add_argument("--detail-field-normals", default=None, action=Once, choices=("person", "template"),
+                   help="the directions the detail field displaces along: 'person' (default), the normals of the "
+                        "person's fitted identity modes (the modes-only fit's, then the joint fit's halfway); "
+                        "'template', the template's normals (the previous field: where the person's surface is tilted "
+                        "against the template's, the field's tangential part slides the points)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -99,6 +99,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
+from .fieldnormals import fit_along_person_normals, person_normals
 from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 
 
@@ -112,6 +113,8 @@ INDUCING_CELL = 0.6
 MAX_INDUCING = 4000
 #: the field's bases (:class:`DetailPriorOptions`.basis)
 BASES = ("kernel", "spectral")
+#: the field's directions (:class:`DetailPriorOptions`.field_normals; eq. D4)
+FIELD_NORMALS = ("person", "template")
 #: ``amplitude`` ``"auto"`` with the fixed coefficient prior (``noise_prior`` False, the previous pipeline) is the previous
 #: rule with this amplitude: the evidence's noise level sets eq. D2's prior, which the fixed prior does not take (it is
 #: stronger than the noise on purpose, to find the basin from the template), and the evidence's ``s`` beside the fixed
@@ -167,6 +170,9 @@ class DetailPriorOptions:
         that continues from the modes-only fit (``noise_prior``; the modes-only fit, and the joint fit from the
         template with the fixed prior, keep ``ModelFitOptions.samples``, 5000): the field's functions need more data
         than the modes (default: every vertex of ICT's 14062; with 5000, ~2800 kept pairs for 400 unknowns)
+    field_normals : the directions the field displaces along (``m`` of eq. D1): ``"person"`` (the default), the
+        normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's for the first half of
+        the joint fit's rounds, the joint fit's after them); ``"template"``: the template's (the previous pipeline)
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
         the modes-only fit, ``ModelFitOptions.iterations``
@@ -181,6 +187,7 @@ class DetailPriorOptions:
     basis: str = "kernel"
     fit_samples: int = 100_000
     fit_iterations: int = 20
+    field_normals: str = "person"
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
@@ -199,6 +206,9 @@ class DetailPriorOptions:
             u = getattr(self, k)
             if isinstance(u, bool) or not (isinstance(u, (int, np.integer)) and u >= 1):
                 raise InputError(f"detail.{k}: expected an integer >= 1, found {u!r}")
+        if self.field_normals not in FIELD_NORMALS:
+            raise parameter_error("detail_field_normals", f"one of {', '.join(FIELD_NORMALS)}", repr(self.field_normals),
+                                  label="detail.field_normals")
         if self.basis not in BASES:
             raise parameter_error("detail_basis", f"one of {', '.join(BASES)}", repr(self.basis), label="detail.basis")
 
@@ -313,7 +323,7 @@ def offset_rms(offset: np.ndarray, no_surface: np.ndarray) -> float:
 
 def fit_with_detail(plain: ModelFit, prior: DetailPrior, base: np.ndarray, deltas: np.ndarray, surface,
                     normals_of, h: float, s: float, options: ModelFitOptions = ModelFitOptions(),
-                    start: ModelFit | None = None) -> ModelFit:
+                    start: ModelFit | None = None, field_normals: np.ndarray | None = None) -> ModelFit:
     """The joint fit of eq. D1 on one part, after a modes-only fit ``plain`` of the same part.
 
     Parameters
@@ -325,6 +335,10 @@ def fit_with_detail(plain: ModelFit, prior: DetailPrior, base: np.ndarray, delta
     normals_of : unit vertex normals ``(n, 3) -> (n, 3)`` of the part's topology
     h : length unit (median edge length)
     s : the field's pointwise standard deviation (template units)
+    start : a fit of the modes the joint fit continues from (its coefficients, the field at zero)
+    field_normals : (n, 3) unit normals the field ``f`` displaces along (``m`` of eq. D1); default the
+        template's (``prior.normals``). :func:`identity_fit_with_detail` passes the modes-only fit's (eq. D4 of
+        :mod:`.fieldnormals`); continued from ``start``, the joint fit's own after half its rounds
 
     Returns
     -------
@@ -339,8 +353,13 @@ def fit_with_detail(plain: ModelFit, prior: DetailPrior, base: np.ndarray, delta
     c0 = pose0 = None
     if start is not None:  # continued from a fit of the modes (its coefficients, the field at zero)
         c0, pose0 = np.concatenate([start.coefficients, np.zeros(len(prior.phi))]), start.pose
-    fit = fit_shape_model(base, ModesAndField(deltas, prior.phi, prior.normals), surface, normals_of, h, options, sigma=sigma,
-                          c0=c0, pose0=pose0)
+    if field_normals is None or start is None:  # the template's normals, or one pass from the template
+        m = prior.normals if field_normals is None else field_normals
+        fit = fit_shape_model(base, ModesAndField(deltas, prior.phi, m), surface, normals_of, h, options, sigma=sigma,
+                              c0=c0, pose0=pose0)
+    else:  # eq. D4 (.fieldnormals): along the modes-only fit's normals, then the joint fit's after half the rounds
+        fit = fit_along_person_normals(base, deltas, lambda m: ModesAndField(deltas, prior.phi, m), field_normals,
+                                       surface, normals_of, h, options, sigma, c0, pose0)
     return ModelFit(fit.vertices, fit.coefficients[:K], fit.pose, fit.rms, fit.pairs,
                     plain.iterations + fit.iterations, float(s))
 
@@ -370,9 +389,11 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
     D, choice = reg.identity.deltas, None
+    m = person_normals(P[part], D[:, part], plain.coefficients, icp.vertex_normals) if (
+        opts.field_normals == "person") else None                                       # eq. D4
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
         choice, fo_e = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals,
-                                        h, fo)
+                                        h, fo, m)
         if np.isfinite(choice.log_evidence):
             s, fo = choice.sd, fo_e
         else:  # the evidence could not be evaluated (a singular normal matrix): the amplitude rule and eq. D2,
@@ -384,7 +405,7 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
         s = amplitude * offset_rms(out.offset, out.no_surface)
     fit = fit_with_detail(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, s, fo,
-                          start=plain if opts.noise_prior else None)
+                          start=plain if opts.noise_prior else None, field_normals=m)
     if choice is not None:
         fit = dataclasses.replace(fit, detail_noise=choice.noise)
     if reg.skin is None or fit is plain:
@@ -395,14 +416,14 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
 
 
 def _evidence_choice(plain: ModelFit, prior: DetailPrior, base: np.ndarray, deltas: np.ndarray, surface, normals_of,
-                     h: float, fo: ModelFitOptions):
+                     h: float, fo: ModelFitOptions, field_normals: np.ndarray | None = None):
     """``(EvidenceChoice, the joint fit's options)``: ``s`` and the noise level ``sigma_n`` maximising eq. E1 of
     :mod:`.detailevidence` at the modes-only fit ``plain`` (the field at zero), paired as the joint fit with options
     ``fo`` pairs; the joint fit's ``mu`` is eq. D2 at ``sigma_n`` over those pairs (within the bounds of
     :func:`noise_prior`)."""
     from .detailevidence import choose_by_evidence, normal_equations
 
-    basis = ModesAndField(deltas, prior.phi, prior.normals)
+    basis = ModesAndField(deltas, prior.phi, prior.normals if field_normals is None else field_normals)
     c = np.concatenate([plain.coefficients, np.zeros(len(prior.phi))])
     H, g, yy, p, npose = normal_equations(base, basis, c, plain.pose, surface, normals_of, h, fo)
     choice = choose_by_evidence(H, g, yy, p, npose, prior.scales, h, plain.rms)
@@ -421,6 +442,6 @@ def detail_report(fit: ModelFit) -> dict:
                              "noise_template_units": float(fit.detail_noise) if fit.detail_noise > 0 else None}}
 
 
-__all__ = ["AUTO_FIXED_PRIOR", "BASES", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
+__all__ = ["AUTO_FIXED_PRIOR", "BASES", "FIELD_NORMALS", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
            "fit_with_detail", "identity_fit_with_detail",
            "noise_prior", "offset_rms"]

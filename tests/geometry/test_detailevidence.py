@@ -170,22 +170,25 @@ def test_cli_auto_amplitude_is_logged_and_reported(tmp_path, capsys):
 
 def test_the_joint_fit_runs_at_the_chosen_deviation_and_noise_level(monkeypatch):
     """``s`` and eq. D2's ``mu`` at the evidence's noise level over the linearisation's pairs reach the joint fit."""
-    from facebasis.geometry import detailevidence, detailprior
+    from facebasis.geometry import detailevidence, detailprior, fieldnormals
 
     T, F, basis, c, S, G, _ = _face_person(True)
     seen, chosen = [], []
     original, choose = detailprior.fit_shape_model, detailevidence.choose_by_evidence
     monkeypatch.setattr(detailprior, "fit_shape_model", lambda *a, **k: seen.append((a, k)) or original(*a, **k))
+    # (the joint fit along the person's normals, eq. D4: two halves of its rounds)
+    monkeypatch.setattr(fieldnormals, "fit_shape_model", lambda *a, **k: seen.append((a, k)) or original(*a, **k))
     monkeypatch.setattr(detailevidence, "choose_by_evidence", lambda *a, **k: chosen.append((a, choose(*a, **k)))
                         or chosen[-1][1])
     res = Registration(T, F, RegistrationOptions(detail=DetailPriorOptions(modes=40)), identity=basis).register(S, G)
-    assert len(seen) == 1 and len(chosen) == 1
+    assert len(seen) == 2 and len(chosen) == 1
     (H, p, npose, scales, h), choice = (chosen[0][0][k] for k in (0, 3, 4, 5, 6)), chosen[0][1]
     assert H.shape == (7 + 12 + 40, 7 + 12 + 40)
     assert npose == 7 and len(scales) == 40 and p > 1000
-    opts, sigma = seen[0][0][5], seen[0][1]["sigma"]
-    assert opts.prior == pytest.approx(choice.noise ** 2 / (p * h ** 2))
-    assert sigma[12:] == pytest.approx(choice.sd * scales) and np.all(sigma[:12] == 1.0)
+    for a, k in seen:
+        opts, sigma = a[5], k["sigma"]
+        assert opts.prior == pytest.approx(choice.noise ** 2 / (p * h ** 2))
+        assert sigma[12:] == pytest.approx(choice.sd * scales) and np.all(sigma[:12] == 1.0)
     assert res.model.detail_sd == choice.sd and res.model.detail_noise == choice.noise
 
 

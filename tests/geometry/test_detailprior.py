@@ -330,15 +330,19 @@ def test_the_joint_fit_gets_its_samples_rounds_and_pair_count(monkeypatch, noise
         pairs.append((fit.pairs, p, prior_of(fit, h, ceiling, p)))
         return pairs[-1][2]
 
+    from facebasis.geometry import fieldnormals
+
     monkeypatch.setattr(detailprior, "fit_shape_model", spy)
+    monkeypatch.setattr(fieldnormals, "fit_shape_model", spy)   # continued: along the person's normals (eq. D4)
     monkeypatch.setattr(detailprior, "noise_prior", prior_spy)
     fit_opts = ModelFitOptions(samples=1000)
     opts = RegistrationOptions(identity_fit=fit_opts, detail=DetailPriorOptions(modes=40, noise_prior=noise, amplitude=2.0,
                                                                                 fit_samples=3000, fit_iterations=7))
     Registration(T, F, opts, identity=basis).register(S, G)
-    assert len(seen) == 1
-    if noise:
-        assert (seen[0].samples, seen[0].iterations) == (3000, 7)
+    assert len(seen) == (2 if noise else 1)
+    if noise:  # the rounds split in two halves: the field along the modes-only fit's normals, then the joint fit's
+        assert [(o.samples, o.iterations) for o in seen] == [(3000, 3), (3000, 4)]
+        assert seen[1].prior == seen[0].prior
         assert len(pairs) == 1 and pairs[0][1] == pytest.approx(pairs[0][0] * 3000 / 1000)
         assert seen[0].prior == pairs[0][2] and seen[0].prior_start is None
     else:

@@ -23,7 +23,8 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "detail_field_normals": "--detail-field-normals",
          "expression_scan_pairs": "--expression-scan-pairs", "expression_pairs_schedule": "--expression-pairs-schedule",
          "rest_anchor": "--rest-anchor", "focal": "--focal", "noise_model": "--noise-model",
-         "point_noise": "--point-noise", "gaze": "--gaze"}
+         "point_noise": "--point-noise", "gaze": "--gaze",
+         "rest_depth": "--rest-depth"}
 
 #: a command whose flag for a library parameter is not :data:`FLAGS`'s (``landmarks``' ``--frame`` is
 #: :func:`facebasis.capture.video.read_frame`'s ``index``)

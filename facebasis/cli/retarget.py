@@ -54,7 +54,7 @@ def cmd_retarget(args) -> int:
                      identity="first-frame" if args.first_frame_neutral else args.identity, exclude=args.exclude,
                      preview=not args.no_preview, log=say(args.command), animate_pose=not args.no_pose, unit=args.unit,
                      rest_anchor=args.rest_anchor != "off", focal=args.focal, noise_model=args.noise_model,
-                     point_noise=args.point_noise, gaze=args.gaze)
+                     point_noise=args.point_noise, gaze=args.gaze, rest_depth=args.rest_depth)
     print(f"solved {s['frames']} frames, {s['ms_per_frame']:.2f} ms per frame; landmark residual "
           f"{s['residual_px_mean']:.3f} px mean, {s['residual_px_max']:.3f} px max -> {args.out}")
     return 0
@@ -88,6 +88,10 @@ def _camera_args(p) -> None:
                         "rig's conjugate eye-look pairs, up with up, down with down, one eye's in with the other's out: "
                         "landmarks see no iris, only the lids); "
                         "'free': each eye's look shapes on their own (the former model)")
+    p.add_argument("--rest-depth", default=None, action=Once, choices=("tangent", "none"),
+                   help="with --identity auto: 'tangent' (default) also tries the rest face's landmark offsets lifted "
+                        "onto the rig's skin along each frame's view (a detector's convention slides along the skin), "
+                        "kept if the check frames fit better than with the flat offsets; 'none': flat (the former model)")
 
 
 def register(subparsers) -> None:

@@ -34,13 +34,11 @@ otherwise the rig's neutral stays (a capture of the rig's own face gives exactly
 ``identity="rig"``). Limits: an expression held through more than ``1 - BASELINE_QUANTILE`` of the
 capture is taken as the person's neutral; a face that differs from the rig's in the negative
 direction of a shape stays unexplained (the shape rests at 0 and the residual keeps the difference);
-the residual part has no depth (exact for the head orientations of the pilot frames, approximate away
-from them; the rest face of :func:`calibrate_rest` has the skin's, :mod:`.restdepth`).
+the residual part has no depth (the rest face of :func:`calibrate_rest` may take the skin's, :mod:`.restdepth`).
 
-Every calibration here takes a :class:`.framefit.FrameSolver` (frozen) and returns an
-:class:`IdentityCalibration` (frozen): the offset and the neutral landmarks it settled on. None of
-them changes the solver it is given; the caller builds the solver it needs
-(``solver.with_neutral(calibration.neutral)``).
+Every calibration takes a :class:`.framefit.FrameSolver` (frozen) and returns an :class:`IdentityCalibration`
+(frozen): the offset and the neutral landmarks it settled on. None changes the solver it is given; the caller
+builds the one it needs (``solver.with_neutral(calibration.neutral)``).
 """
 
 from __future__ import annotations
@@ -382,13 +380,15 @@ def calibrate_rest(solver: FrameSolver, landmarks, visible, n_frames: int = REST
         frames = np.union1d(frames, np.asarray(window, np.int64))
         win = np.searchsorted(frames, np.asarray(window, np.int64))
     before = _fitted_rms(solver, P, vis, check) if rms_before is None else rms_before
-    poses, moved = None, solver
-    for _ in range(rounds):
-        O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
-        near, anchored = rest_frames(O, share, 0 if anchor else None, window=win)
-        off = rest_offset(O[near], np.array([poses[j][1] for j in near]), solver.normals)   # depth: restdepth.py
-        moved = moved.shifted(off)
-    after = _fitted_rms(moved, P, vis, check)
+    fits = []  # the offset lifted onto the skin (restdepth.py) and flat: the one the check frames fit better
+    for normals in (solver.normals, None)[: 1 + (solver.normals is not None)]:
+        poses, moved = None, solver
+        for _ in range(rounds):
+            O, poses, _ = rest_offsets(moved, P, vis, frames, poses)
+            near, anchored = rest_frames(O, share, 0 if anchor else None, window=win)
+            moved = moved.shifted(rest_offset(O[near], np.array([poses[j][1] for j in near]), normals))
+        fits.append((_fitted_rms(moved, P, vis, check), moved, anchored))
+    after, moved, anchored = min(fits, key=lambda f: f[0])
     if not after <= (1.0 - REST_MIN_GAIN) * before:
         return IdentityCalibration(np.zeros((L, 3)), np.zeros(k), frames, before, before, float("nan"), False,
                                    neutral=v_start)

@@ -4,9 +4,10 @@ The rest face of :func:`.calibrate.calibrate_rest` is a static offset ``delta_l`
 from the rig's neutral. A frame at pose (s, R) shows only ``s Pi R delta_l``: carrying its image
 residual ``r_l`` back into the rig frame gives ``d_l = R^T Pi^T r_l / s``, the offset in the plane
 facing that frame's camera, and any ``delta_l = d_l + alpha v`` along the frame's viewing direction
-``v = R^T e_z`` shows the same image. The in-plane choice (alpha = 0, then the rig-frame depth dropped:
-the model before this module) is exact at the head orientation of the frames it was measured on and
-wrong as the head turns away: a rest face measured on a head turned by -13 degrees and used on frames
+``v = R^T e_z`` shows the same image (to first order under perspective). The in-plane choice (alpha = 0,
+then the rig-frame depth dropped: the model before this module; dropping the depth changes the image by
+about ``d tan(theta) sin(theta)``, 5% at 13 degrees) holds near the head orientation of the frames it
+was measured on and not as the head turns away: a rest face measured on a head turned by -13 degrees and used on frames
 turned by +5 leaves a residual the expression shapes take (measured on the dlib cut of cap12 from 20 s,
 :mod:`problems.rest_cuts`: its calm frames at yaw -12.8 degrees against +6.2 over the cut read as
 jawLeft 0.186).
@@ -21,10 +22,19 @@ larger than normal ones), the most probable offset showing ``d_l`` is
     alpha = -(n_l . d_l) (n_l . v) / ((n_l . v)^2 + eps),  eps = sigma_n^2 / (sigma_t^2 - sigma_n^2)   (T1)
 
 eps -> 0 the pure tangent plane, eps -> inf the in-plane offset. Where the skin faces the camera
-(brows, nose, outer lips) it lifts ``d_l`` into the tangent plane; where the view grazes the skin
-(the jaw line's silhouette points, n . v -> 0, where the tangent plane holds the viewing direction and
-the depth is not determined) it leaves ``d_l`` in-plane. :data:`TANGENT_EPS` = 0.1 (sigma_t ~ 3.3
-sigma_n; alpha halved at 72 degrees between normal and view). Each rest frame's offset is lifted with
+(brows, nose, outer lips) it lifts ``d_l`` into the tangent plane; only where the view grazes the skin
+(n . v -> 0) does it leave ``d_l`` in-plane: the depth gain |n.v| / ((n.v)^2 + eps) peaks at 1/(2 sqrt eps)
+= 1.58 at 72 degrees between normal and view, so ICT's jaw-line landmarks at a frontal view (n_z 0.19-0.41)
+get the largest depth, not the least. :data:`TANGENT_EPS` = 0.1 (sigma_t ~ 3.3 sigma_n), chosen on the cut
+reported below.
+
+The lift is right for a landmark convention and wrong for a face that differs from the rig along the
+normal: for an offset h n it returns h (n - v / (n . v)), a depth error h / (n . v) against the flat
+model's ~h (n . v) (review of this module: a nose 0.5 deeper on the built-in face, residual 0.34 -> 0.70 px;
+ICT identities 1-3 at 15 degrees of head motion, weight error 0.0151 / 0.0208 / 0.0281 -> 0.0182 / 0.0243 /
+0.0228). :func:`.calibrate.calibrate_rest` therefore builds the rest face both ways and keeps the one whose
+check frames (several head orientations) fit better: on those ICT identities it keeps the flat one (weight
+errors as without the lift), on the dlib cut below the lifted one. Each rest frame's offset is lifted with
 its own rotation before the landmark-wise median (:func:`rest_offset`), so frames at different head
 orientations agree on one 3D offset.
 

@@ -225,9 +225,11 @@ class RigRetargeter:
         one noise for every landmark (the former model)
     gaze : "conjugate" (the default): the eyes look the same way, a Gaussian prior on the difference of
         each conjugate eye-look pair the rig has by name (:mod:`.gaze`); "free": no such prior
-    rest_depth : "tangent" (the default): the rest face's offsets get depth, each landmark's in the rig's
-        tangent plane at its vertex, so the rest face measured on a turned head holds as it turns back
-        (:mod:`.restdepth`); "none": in-plane offsets without depth (the former model)
+    rest_depth : "tangent" (the default): the rest face (``identity="auto"``'s rest face only; the quantile
+        baseline and the first-frame neutral stay flat) is also built with its offsets lifted into the rig's
+        tangent plane at each vertex, and kept if its check frames fit better than the flat one's, so a rest
+        face measured on a turned head holds as it turns back (:mod:`.restdepth`); "none": flat offsets
+        without depth (the former model)
     """
 
     def __init__(self, rig: Rig, indices, pairs=(), smooth: float = DEFAULT_SMOOTH, ridge: float = DEFAULT_RIDGE,

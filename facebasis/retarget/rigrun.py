@@ -151,7 +151,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
                  neutral: str = "neutral.obj", solver: str = "certified", first_frame_neutral: bool | None = None,
                  identity: str | None = None, exclude=(), preview: bool = True, log=None, animate_pose: bool = True,
                  unit: str = "cm", rest_anchor: bool = True, focal: float | None = None,
-                 noise_model: str | None = None, point_noise: str | None = None, gaze: str | None = None) -> dict:
+                 noise_model=None, point_noise=None, gaze=None, rest_depth=None) -> dict:
     """Per-frame weights and head pose of a rig from a capture's landmarks (see :mod:`.rigdrive`).
 
     ``animation.glb`` holds the weights and (``animate_pose``) the head's rotation and translation,
@@ -164,7 +164,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     (:class:`.rigdrive.RigRetargeter`). ``focal`` (px, None: weak perspective; principal point the image
     centre, recorded as ``principal_point_px``), ``noise_model`` ("pixels", the default, or "rig") and ``point_noise``
     ("per-point", the default, or "shared"; the landmarks' weights in ``summary.json``) and ``gaze`` ("conjugate", the
-    default, or "free"; the tied pairs in ``summary.json``): :class:`.rigdrive.RigRetargeter`. ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
+    default, or "free"; the tied pairs in ``summary.json``), ``rest_depth`` ("tangent", default, or "none"): :class:`.rigdrive.RigRetargeter`. ``exclude``: rig-folder files to leave out (globs). ``preview`` (default): also ``preview.mp4``
     (the source video beside the rig rendered with the solved weights and head rotation) and
     ``weights.png`` (the main weights over time), see :mod:`.preview`.
     """
@@ -172,6 +172,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     from ..geometry.gltf import unit_scale
     from .framefit import check_camera
     from .preview import rig_frames
+    from .restdepth import REST_DEPTH_MODES
     from .rigdrive import (DEFAULT_SMOOTH, GAZE_MODES, NOISE_MODELS, POINT_NOISE_MODES, RigRetargeter, resolve_identity,
                            resolve_pairs)
 
@@ -180,6 +181,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     noise_model = parse_mode("noise_model", noise_model, NOISE_MODELS, "pixels")
     point_noise = parse_mode("point_noise", point_noise, POINT_NOISE_MODES, "per-point")
     gaze = parse_mode("gaze", gaze, GAZE_MODES, "conjugate")
+    rest_depth = parse_mode("rest_depth", rest_depth, REST_DEPTH_MODES, "tangent")
     ridge = _parse_ridge(ridge)
     from .rigdrive import IDENTITY_MODES
 
@@ -198,7 +200,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
     centre = None if focal is None else (cap.size[0] / 2.0, cap.size[1] / 2.0)
     solver_obj = RigRetargeter(r, idx, named, smooth, ridge, solver=solver, identity=identity, rest_anchor=rest_anchor,
                                focal=focal, centre=centre, noise_model=noise_model,
-                               point_noise=point_noise, gaze=gaze)
+                               point_noise=point_noise, gaze=gaze, rest_depth=rest_depth)
     ridge_text = "auto (from the landmark noise)" if ridge == "auto" else f"{ridge:g}"
     _log(log, f"rig {r.source}: {r.n_shapes} shapes, {r.n_vertices} vertices; {len(idx)} landmarks; "
               f"{len(named)} exclusive pairs" + (": " + ", ".join(f"{a}:{b}" for a, b in named) if named else "")
@@ -209,7 +211,7 @@ def run_retarget(capture_dir, out_dir, rig=None, landmarks=None, exclusive=(), s
              "solver": solver, "identity": identity, "first_frame_neutral": identity == "first-frame",
              "focal_px": focal, "principal_point_px": None if centre is None else [float(c) for c in centre],
              "noise_model": solver_obj.noise_model, "noise_pixel_scale": result.pixel_scale,
-             "point_noise": point_noise, "gaze": gaze,
+             "point_noise": point_noise, "gaze": gaze, "rest_depth": rest_depth,
              "gaze_pairs": [[r.names[a], r.names[b]] for a, b in solver_obj.gaze_pairs]}
     cal = result.calibration
     if cal is not None:

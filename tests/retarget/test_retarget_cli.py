@@ -453,3 +453,34 @@ def test_gaze_option(capture, tmp_path, capsys, monkeypatch):
 
         run_retarget(tmp_path / "no_such_capture", tmp_path / "out", gaze="left")
     assert not (tmp_path / "out").exists()
+
+
+def test_rest_depth_option(capture, tmp_path, capsys, monkeypatch):
+    """--rest-depth tangent|none reaches the solver (default: the library's, tangent) and the summary; bad or
+    repeated values are one line with nothing written."""
+    from facebasis.retarget.rigdrive import RigRetargeter
+
+    folder, _ = capture
+    seen = []
+    original = RigRetargeter.__init__
+
+    def spy(self, *a, **kw):
+        seen.append(kw.get("rest_depth"))
+        original(self, *a, **kw)
+
+    monkeypatch.setattr(RigRetargeter, "__init__", spy)
+    for extra, want in (([], "tangent"), (["--rest-depth", "none"], "none"), (["--rest-depth", "tangent"], "tangent")):
+        out = tmp_path / f"rd{len(seen)}"
+        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
+        assert code == 0, stdout
+        assert seen[-1] == want
+        assert json.loads((out / "summary.json").read_text())["rest_depth"] == want
+    for argv, msg in ((["--rest-depth", "deep"], "invalid choice: 'deep'"),
+                      (["--rest-depth", "none", "--rest-depth", "tangent"], "--rest-depth")):
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(InputError, match=r"^rest_depth: expected one of tangent, none, found 'deep'$"):
+        from facebasis.retarget.pipeline import run_retarget
+
+        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", rest_depth="deep")
+    assert not (tmp_path / "out").exists()

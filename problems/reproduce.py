@@ -357,9 +357,11 @@ RECIPES: tuple[Recipe, ...] = (
                    f"--no-baseline --fit-modes 100 --after-model normal --regions 48 --detail-amplitude 2 "
                    f"--out reports/registration/round7_amp2_seed{s}" for s in (1, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
-    Recipe("registration-rig-round8", "The rig bench with today's defaults (round 7's command without its pin to the "
-           "expression fit before its scan pairs: --expression-scan-pairs at the library's 5000, the rigid stage's "
-           "one-sided refinement, the detail field along the person's normals, eq. D4 of geometry/fieldnormals.py), "
+    Recipe("registration-rig-round8", "The rig bench at commit b98726f (round 7's command without its pin to the "
+           "expression fit before its scan pairs: --expression-scan-pairs 5000 from the first round, the rigid stage's "
+           "one-sided refinement before review5's fixes, the detail field along the person's normals, eq. D4 of "
+           "geometry/fieldnormals.py; today's code adds the pairs schedule and eq. S3, which no flag of the bench "
+           "pins, so a re-run differs on the expression scans), "
            "both persons, seeds 0, 1, 2 and 3; baselines: registration-rig-round8-template (the same code with the "
            "field along the template's normals) and registration-rig-round7",
            tuple(f"registration/round8_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),

@@ -143,7 +143,7 @@ def register(subparsers) -> None:
                         "report's detail_field.chosen_by says which)")
     p.add_argument("--detail-field-normals", default=None, action=Once, choices=("person", "template"),
                    help="the directions the detail field displaces along: 'person' (default), the normals of the "
-                        "person's fitted identity modes (the modes-only fit's, then the joint fit's halfway); "
+                        "person's fitted identity modes (the modes-only fit's, then the joint fit's once it has converged); "
                         "'template', the template's normals (the previous field: where the person's surface is tilted "
                         "against the template's, the field's tangential part slides the points)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),

@@ -171,8 +171,9 @@ class DetailPriorOptions:
         template with the fixed prior, keep ``ModelFitOptions.samples``, 5000): the field's functions need more data
         than the modes (default: every vertex of ICT's 14062; with 5000, ~2800 kept pairs for 400 unknowns)
     field_normals : the directions the field displaces along (``m`` of eq. D1): ``"person"`` (the default), the
-        normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's for the first half of
-        the joint fit's rounds, the joint fit's after them); ``"template"``: the template's (the previous pipeline)
+        normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's until the joint fit
+        has converged once, then a few more rounds along its own; with the fixed prior the modes-only fit's
+        throughout); ``"template"``: the template's (the previous pipeline)
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
         the modes-only fit, ``ModelFitOptions.iterations``

@@ -14,10 +14,17 @@ normals of the person's modes mesh,
 
     m = normals(T + sum_k c_k D_k)                                                       (eq. D4)
 
-the modes-only fit's ``c`` for the first half of the joint fit's rounds, the joint fit's own after them (one
-update: the normals of a continued fit barely move after it; a second joint fit from the modes-only fit along
-the updated normals cost 2.2 s CPU more for 0.0224 -> 0.0221 cm on seed 3). Same cost as before (the rounds
-are split, not added). Registered neutral of seed 3 ``detail``, RMS over all vertices, template normals ->
+the modes-only fit's ``c`` until the joint fit has converged (at most half its rounds), then a few rounds more
+along the joint fit's own (one update: the normals of a continued fit barely move after it; a second joint
+fit from the modes-only fit along the updated normals cost 2.2 s CPU more for 0.0224 -> 0.0221 cm on seed 3);
+the added rounds cost 0.2-0.5 s CPU per ICT neutral (review: 7.4 -> 7.9 s). With the fixed prior
+(``noise_prior`` off) the whole joint fit runs along the modes-only fit's normals.
+
+The assumption: a person's own detail lies along the normals of their best in-space approximation (how the
+bench builds it, and how a surface's offset from its nearest in-space shape is naturally measured). Detail
+laid along the *template's* normals instead is fitted worse with eq. D4 (review on ICT seed 3: face median /
+p95 0.0158 / 0.0417 with template normals against 0.0202 / 0.0570 with D4); ``field_normals="template"``
+keeps that model. Registered neutral of seed 3 ``detail``, RMS over all vertices, template normals ->
 eq. D4: 0.0270 -> 0.0224 cm (face median / p95 0.017 / 0.050 -> 0.013 / 0.030); seed 1 0.0187 -> 0.0181
 (scratch scripts re-registering the bench's neutral scans).
 """

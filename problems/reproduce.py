@@ -283,6 +283,17 @@ RECIPES: tuple[Recipe, ...] = (
                    "--scan-pairs 5000 --schedules after --out reports/registration/mouth_basin" for s in range(5))
            + (f"{PY} problems.bench_mouth_basin --table --out reports/registration/mouth_basin",),
            data=("ict",), script="problems/bench_mouth_basin.py"),
+    Recipe("registration-mouth-basin-final", "The mouth-basin bench's scans with the expression fit as it ends this "
+           "round, every row at one commit (fa5e20b): scan pairs after a one-sided fit, the continued fit kept below 0.9 "
+           "times the one-sided fit's eq. S2, the pairs mutual (eq. S3 of geometry/scanpairs.py); the neutral's detail "
+           "field still along the template's normals (eq. D4 landed after: a re-run today registers other neutrals); "
+           "seeds 0-4, both persons",
+           tuple(f"registration/mouth_basin_final/seed{s}.csv" for s in range(5))
+           + ("registration/mouth_basin_final/mouth_basin.md",),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_mouth_basin --seeds {s} --persons detail in-space "
+                 "--scan-pairs 5000 --schedules after --out reports/registration/mouth_basin_final" for s in range(5))
+           + (f"{PY} problems.bench_mouth_basin --table --out reports/registration/mouth_basin_final",),
+           data=("ict",), script="problems/bench_mouth_basin.py"),
     Recipe("registration-rigid", "The rigid stage without landmarks (search_similarity: orientation search, one-sided "
            "refinement, perturbed restarts; then refine_point_to_plane) on whole-head and face-only scans of ICT "
            "identities at neutral, jawOpen, mouthSmile_L, mouthPucker, seeds 0-2: rotation and translation errors, the "

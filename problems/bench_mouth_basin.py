@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import io
 import os
 import time
 from pathlib import Path
@@ -42,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from problems.bench_registration import _ears, _ict_setup, make_scan
+from problems.csvrows import csv_bytes
 
 #: the rig bench's own single-shape scans (its generator continued after its neutral and its 12 training scans),
 #: then more from the same generator, then from a second one (seeded 7000 + seed)
@@ -137,15 +137,6 @@ def run_person(seed: int, kind: str, scan_pairs, schedules=("joint", "after"), l
     return rows
 
 
-def _csv_bytes(rows: list) -> bytes:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (f"{v:.5g}" if isinstance(v, float) else v) for k, v in r.items()})
-    return buf.getvalue().encode()
-
-
 def write_table(out: Path) -> Path:
     """``mouth_basin.md`` from every ``seed*.csv`` under ``out``: per scan pairs value, every scan's
     figures and a line of totals (scans over the targets, worst p95, CPU)."""
@@ -233,7 +224,7 @@ def main(argv=None):
         rows = []
         for kind in args.persons:
             rows += run_person(seed, kind, args.scan_pairs, args.schedules)
-            atomic_write_bytes(out / f"seed{seed}.csv", _csv_bytes(old + rows))  # after every person: kept if stopped
+            atomic_write_bytes(out / f"seed{seed}.csv", csv_bytes(old + rows))  # after every person: kept if stopped
 
 
 def _rows(path: Path) -> list[dict]:

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import io
 import os
 import time
 from pathlib import Path
@@ -39,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from problems.bench_registration import _ears, _ict_setup, make_scan
+from problems.csvrows import csv_bytes
 
 SCANS = ("neutral", "jawOpen", "mouthSmile_L", "mouthPucker")
 CUTS = ("head", "face")
@@ -133,15 +133,6 @@ def run(seeds, cuts=CUTS, scans=SCANS, log=print, write=None) -> list[dict]:
     return rows
 
 
-def _csv_bytes(rows: list) -> bytes:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (f"{v:.5g}" if isinstance(v, float) else v) for k, v in r.items()})
-    return buf.getvalue().encode()
-
-
 def write_table(out: Path) -> Path:
     """``rigid.md`` from ``rigid.csv``: per cut, median / max of each method's errors, the check's verdicts and
     CPU; then every row."""
@@ -202,7 +193,7 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if not args.table:
-        run(args.seeds, args.cuts, args.scans, write=lambda rows: atomic_write_bytes(out / "rigid.csv", _csv_bytes(rows)))
+        run(args.seeds, args.cuts, args.scans, write=lambda rows: atomic_write_bytes(out / "rigid.csv", csv_bytes(rows)))
     print(write_table(out))
 
 

@@ -284,10 +284,11 @@ RECIPES: tuple[Recipe, ...] = (
            + (f"{PY} problems.bench_mouth_basin --table --out reports/registration/mouth_basin",),
            data=("ict",), script="problems/bench_mouth_basin.py"),
     Recipe("registration-mouth-basin-final", "The mouth-basin bench's scans with the expression fit as it ends this "
-           "round, every row at one commit (fa5e20b): scan pairs after a one-sided fit, the continued fit kept below 0.9 "
-           "times the one-sided fit's eq. S2, the pairs mutual (eq. S3 of geometry/scanpairs.py); the neutral's detail "
-           "field still along the template's normals (eq. D4 landed after: a re-run today registers other neutrals); "
-           "seeds 0-4, both persons",
+           "round, every row at one commit (1924826): scan pairs after a one-sided fit, the continued fit kept when its "
+           "eq. S2 is lower (no margin), the pairs mutual (eq. S3 of geometry/scanpairs.py), the neutral's detail "
+           "field along the person's normals (eq. D4); seeds 0-4, both persons. A run at fa5e20b with a 0.9 margin on "
+           "eq. S2 and the field along the template's normals had 3 of 90 over the targets (seed 4 in-space mouthClose, "
+           "seed 1 jawOpen + mouthClose both persons: the one-sided fit kept in a wrong basin)",
            tuple(f"registration/mouth_basin_final/seed{s}.csv" for s in range(5))
            + ("registration/mouth_basin_final/mouth_basin.md",),
            tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_mouth_basin --seeds {s} --persons detail in-space "

@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mouth2d import feature_frame
+
 #: the two eyes of the 68-point iBUG set: corner, upper lid (2), corner, lower lid (2) in polygon order
 EYES_68 = (np.array([36, 37, 38, 39, 40, 41]), np.array([42, 43, 44, 45, 46, 47]))
 #: the closure (1 - opening / rest opening) from which the lid is drawn opaque
@@ -60,15 +62,7 @@ def eye_frame(eye):
     """The frame of an eye (6, 2) (corner, upper lid 2, corner, lower lid 2): origin at the first
     corner, unit axis ``e`` to the other corner, normal ``n`` pointing from the upper lid to the lower,
     and the width ``w`` (pixels)."""
-    P = np.asarray(eye, np.float64)
-    axis = P[3] - P[0]
-    w = max(float(np.hypot(*axis)), 1e-9)
-    e = axis / w
-    n = np.array([-e[1], e[0]])
-    rel = P - P[0]
-    if (rel[[4, 5]] @ n).mean() < (rel[[1, 2]] @ n).mean():
-        n = -n
-    return P[0], e, n, w
+    return feature_frame(eye, (0, 3), [1, 2], [4, 5])
 
 
 def lid_curves(eye, u, frame=None):

@@ -76,6 +76,21 @@ def opening_opacity(mouth, rest_mouth) -> float:
     return float(np.clip(a / max(a_rest, MIN_OPEN_AREA / w2_rest) - 1.0, 0.0, 1.0))
 
 
+def feature_frame(P, corners, upper, lower):
+    """The frame of a feature outline (eye or inner lips) ``P`` (k, 2): origin at corner ``corners[0]``, unit
+    axis ``e`` to ``corners[1]``, unit normal ``n`` pointing from the ``upper`` points to the ``lower`` ones
+    (index lists), and the corner-to-corner width ``w`` (pixels, at least 1e-9)."""
+    P = np.asarray(P, np.float64)
+    axis = P[corners[1]] - P[corners[0]]
+    w = max(float(np.hypot(*axis)), 1e-9)
+    e = axis / w
+    n = np.array([-e[1], e[0]])
+    rel = P - P[corners[0]]
+    if (rel[lower] @ n).mean() < (rel[upper] @ n).mean():
+        n = -n
+    return P[corners[0]], e, n, w
+
+
 def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
     """Blend the polygon (k, 2) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8 in place
     towards ``colours`` with ``opacity`` (anti-aliased edge, cv2's sub-pixel fill), when the polygon is

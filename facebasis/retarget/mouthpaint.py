@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mouth2d import feature_frame
+
 #: teeth, cavity (at the lips and at the back) and tongue colours (RGB)
 TEETH_RGB = (226, 220, 204)
 CAVITY_EDGE_RGB = (92, 34, 40)
@@ -70,14 +72,9 @@ def mouth_coordinates(inner_lip, x, y):
     (8, 2): ``u`` along the mouth (0 at corner 60, 1 at corner 64), ``s`` from the upper lip (0) to
     the lower lip (1), the local opening ``h`` and the mouth width ``w`` in pixels."""
     P = np.asarray(inner_lip, np.float64)
-    axis = P[4] - P[0]
-    w = max(float(np.hypot(*axis)), 1e-9)
-    e = axis / w
-    n = np.array([-e[1], e[0]])
+    _, e, n, w = feature_frame(P, (0, 4), [1, 2, 3], [5, 6, 7])   # n points from the upper lip to the lower
     rel = P - P[0]
     pu, pv = rel @ e / w, rel @ n
-    if pv[[5, 6, 7]].mean() < pv[[1, 2, 3]].mean():       # n points from the upper lip to the lower
-        n, pv = -n, -pv
     dx, dy = np.asarray(x, np.float64) - P[0, 0], np.asarray(y, np.float64) - P[0, 1]
     u = np.clip((dx * e[0] + dy * e[1]) / w, 0.0, 1.0)
     v = dx * n[0] + dy * n[1]

@@ -206,18 +206,33 @@ def _pairs(X, normals, surface, dmax, cos_max, use, floor):
     return use[ok], U[ok], N[ok]
 
 
-def _solve(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None) -> np.ndarray:
-    """``argmin ||A x - b||`` within ``lb <= x <= ub``, through the small normal matrix ``H = A^T A`` (q, q):
-    unbounded, its Cholesky solve; bounded, the box QP ``min 1/2 x^T H x - (A^T b)^T x`` (:func:`box_qp`;
-    ``start``: its guess of the active bounds). The same minimiser as a bounded least squares on ``A``
-    (BVLS, used before), which solved a dense (q, q) least squares per active-set change: with the
-    regional expression stage's several hundred unknowns (:mod:`.expressionregions`) that was most of
-    an expression scan's time."""
+def normal_equations(Jp: np.ndarray, Jc: np.ndarray, r: np.ndarray, lam: np.ndarray, c: np.ndarray):
+    """The Gauss-Newton step's normal equations ``H dx = g`` of ``min ||[Jp Jc] dx + r||^2 + ||lam (c + dc)||^2``:
+    ``H = [Jp Jc]^T [Jp Jc] + diag(0, lam^2)``, ``g = -[Jp Jc]^T r - (0, lam^2 c)``, built by blocks (the pose's
+    ``Jp`` (p, P), the coefficients' ``Jc`` (p, K)) instead of as ``A^T A`` of the stacked least squares
+    ``A = [[Jp, Jc], [0, diag(lam)]]``: the same matrix without the K prior rows in the product (a third of
+    the regional stage's, :mod:`.expressionregions`) nor the stacked copy."""
+    P = Jp.shape[1]
+    H = np.empty((P + Jc.shape[1],) * 2)
+    H[:P, :P] = Jp.T @ Jp
+    H[:P, P:] = Jp.T @ Jc
+    H[P:, :P] = H[:P, P:].T
+    H[P:, P:] = Jc.T @ Jc
+    H[np.arange(P, len(H)), np.arange(P, len(H))] += lam ** 2
+    g = -np.concatenate([Jp.T @ r, Jc.T @ r + lam ** 2 * c])
+    return H, g
+
+
+def _solve(H: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, start=None) -> np.ndarray:
+    """``argmin 1/2 x^T H x - g^T x`` within ``lb <= x <= ub`` for the normal equations of
+    :func:`normal_equations` (the bounded least squares ``min ||A x - b||`` with ``H = A^T A``, ``g = A^T b``):
+    unbounded, its Cholesky solve; bounded, the box QP (:func:`box_qp`; ``start``: its guess of the active
+    bounds). The same minimiser as a bounded least squares on ``A`` (BVLS, used before), which solved a dense
+    (q, q) least squares per active-set change: with the regional expression stage's several hundred unknowns
+    (:mod:`.expressionregions`) that was most of an expression scan's time."""
     from scipy.linalg import cho_factor, cho_solve
 
-    H = A.T @ A
-    H += 1e-12 * np.trace(H) * np.eye(len(H))
-    g = A.T @ b
+    H = H + 1e-12 * np.trace(H) * np.eye(len(H))
     if np.all(np.isinf(lb)) and np.all(np.isinf(ub)):
         return cho_solve(cho_factor(H), g)
     return box_qp(H, g, lb, ub, start)
@@ -371,13 +386,12 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         mu = options.prior if options.prior_start is None else options.prior_start * (
             options.prior / options.prior_start) ** min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
         lam = np.sqrt(mu) * h / sigma
-        A = np.block([[w * Jp, w * Jc], [np.zeros((K, npose)), np.diag(lam)]])
-        b = np.concatenate([-w * r0, -lam * c])
+        H, g = normal_equations(w * Jp, w * Jc, w * r0, lam, c)
         lb = np.concatenate([np.full(npose, -np.inf), lo - c])
         ub = np.concatenate([np.full(npose, np.inf), hi - c])
         # the bounds that held after the last step: the bounded step's first guess
         start = (np.concatenate([np.zeros(npose, bool), c <= lo]), np.concatenate([np.zeros(npose, bool), c >= hi]))
-        dx = _solve(A, b, lb, ub, start if it > 1 else None)
+        dx = _solve(H, g, lb, ub, start if it > 1 else None)
         R = _rotation_from_vector(dx[:3])
         s = 1.0 + dx[6] if options.scale else 1.0
         pose = pose.then(Similarity(s, R, cen - s * R @ cen + dx[3:6]))

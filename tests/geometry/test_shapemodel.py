@@ -216,15 +216,22 @@ def test_bounded_step_is_the_bounded_least_squares_minimiser(monkeypatch):
     bounds active."""
     from scipy.optimize import lsq_linear
 
-    from facebasis.geometry.shapemodel import _solve, box_qp
+    from facebasis.geometry.shapemodel import _solve, box_qp, normal_equations
 
     rng = np.random.default_rng(4)
-    A, b = rng.standard_normal((80, 30)), 3.0 * rng.standard_normal(80)
+    Jp, Jc, r = rng.standard_normal((80, 6)), rng.standard_normal((80, 24)), 3.0 * rng.standard_normal(80)
+    lam, c = rng.uniform(0.1, 1.0, 24), rng.uniform(-0.2, 0.2, 24)
+    # the stacked least squares the normal equations stand for: residuals [Jp Jc] dx + r and lam (c + dc)
+    A = np.block([[Jp, Jc], [np.zeros((24, 6)), np.diag(lam)]])
+    b = np.concatenate([-r, -lam * c])
     lb = np.concatenate([np.full(6, -np.inf), np.full(24, -0.2)])
     ub = np.concatenate([np.full(6, np.inf), rng.uniform(0.0, 0.3, 24)])
     ref = lsq_linear(A, b, bounds=(lb, ub), method="bvls", tol=1e-14).x
     assert np.sum((ref <= lb + 1e-12) | (ref >= ub - 1e-12)) >= 3  # bounds matter
-    np.testing.assert_allclose(_solve(A, b, lb, ub), ref, rtol=0, atol=1e-9)
+    Hn, gn = normal_equations(Jp, Jc, r, lam, c)
+    np.testing.assert_allclose(Hn, A.T @ A, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gn, A.T @ b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_solve(Hn, gn, lb, ub), ref, rtol=0, atol=1e-9)
     # block pivoting from a guess of the active bounds (right, or every bound wrong), and DAQP alone
     H, g = A.T @ A, A.T @ b
     right = (ref <= lb + 1e-12, ref >= ub - 1e-12)

@@ -254,3 +254,29 @@ def test_bounds_with_a_lower_above_its_upper_are_refused_before_any_work():
     V = np.zeros((4, 3))
     with pytest.raises(InputError, match=r"^bounds: .*at unknown 1 \(1 such\)"):
         fit_shape_model(V, np.zeros((2, 4, 3)), None, None, 1.0, bounds=(np.array([0.0, 2.0]), np.array([1.0, 1.0])))
+
+
+class _JumpingPlanes:
+    """A scan that is two planes, ``z = 1`` for a mesh below ``z = 0.5`` (mean) and ``z = 0.3`` for one above: its
+    closest points jump with the fit, so the closest-point loop cycles between the two for ever (period 2)."""
+
+    def nearest_planes(self, P, plane=True, max_distance=np.inf):
+        z = 1.0 if P[:, 2].mean() < 0.5 else 0.3
+        U = P.copy()
+        U[:, 2] = z
+        return U, np.tile([0.0, 0.0, 1.0], (len(P), 1)), np.abs(P[:, 2] - z), np.zeros(len(P), bool)
+
+
+def test_model_fit_stops_at_a_limit_cycle_and_returns_one_of_its_states():
+    """The loop stops when a round returns to a state of up to CYCLE rounds before, long before its cap, and
+    returns a state of the cycle (a plane), not a mix of the two."""
+    from facebasis.geometry.shapemodel import CYCLE, ModelFitOptions, fit_shape_model
+
+    x, y = np.meshgrid(np.linspace(0, 1, 8), np.linspace(0, 1, 8))
+    base = np.column_stack([x.ravel(), y.ravel(), np.zeros(64)])
+    bend = np.zeros((1, 64, 3))
+    bend[0, :, 2] = base[:, 0] ** 2
+    normals = lambda X: np.tile([0.0, 0.0, 1.0], (len(X), 1))  # noqa: E731
+    fit = fit_shape_model(base, bend, _JumpingPlanes(), normals, 0.1, ModelFitOptions(scale=False, iterations=40))
+    assert fit.iterations <= 2 + CYCLE < 40
+    assert np.ptp(fit.vertices[:, 2]) < 1e-6 and min(abs(fit.vertices[0, 2] - 1.0), abs(fit.vertices[0, 2] - 0.3)) < 1e-6

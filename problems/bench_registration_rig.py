@@ -145,7 +145,7 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
                detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True,
                detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None,
                detail_amplitude: float | str = DETAIL_AMPLITUDE, scan_pairs: int | None = None,
-               field_normals: str = "person", amplitude_map: str = "residual") -> tuple[dict, list]:
+               field_normals: str = "person", amplitude_map: str = "field") -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -171,7 +171,7 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
             "" if detail_fit is None or not detail_modes else f", joint fit {detail_fit[0]} samples {detail_fit[1]} rounds") + (
             "" if detail_amplitude == DETAIL_AMPLITUDE or not detail_modes else f", amplitude {detail_amplitude:g}") + (
             "" if field_normals == "person" or not detail_modes else f", {field_normals} normals") + (
-            "" if amplitude_map == "residual" or not detail_modes else f", {amplitude_map} amplitude")
+            "" if amplitude_map == "field" or not detail_modes else f", {amplitude_map} amplitude")
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
@@ -358,10 +358,11 @@ def main(argv=None):
                     help="DetailPriorOptions.field_normals: the detail field along the person's fitted modes' normals "
                          "(default, eq. D4 of geometry/fieldnormals.py) or the template's (the tables before the "
                          "eighth round)")
-    ap.add_argument("--detail-amplitude-map", choices=("residual", "uniform"), default="residual",
+    ap.add_argument("--detail-amplitude-map", choices=("field", "residual", "uniform"), default="field",
                     help="DetailPriorOptions.amplitude_map: the detail field's deviation larger where the modes-only "
-                         "fit leaves residuals (default, eq. D5 of geometry/fieldamplitude.py) or the same everywhere "
-                         "(the tables before the ninth round)")
+                         "fit leaves residuals, then where the fitted field is (default, eqs. D5-D6 of "
+                         "geometry/fieldamplitude.py), the first step alone, or the same everywhere (the tables before "
+                         "the ninth round)")
     ap.add_argument("--out", default="reports/registration")
     ap.add_argument("--table-only", action="store_true", help="only rewrite rig.md from the CSV files")
     args = ap.parse_args(argv)

@@ -151,10 +151,11 @@ def register(subparsers) -> None:
                         "person's fitted identity modes (the modes-only fit's, then the joint fit's once it has converged); "
                         "'template', the template's normals (the previous field: where the person's surface is tilted "
                         "against the template's, the field's tangential part slides the points)")
-    p.add_argument("--detail-amplitude-map", default=None, action=Once, choices=("residual", "uniform"),
-                   help="the detail field's deviation over the skin: 'residual' (default), larger where the identity "
-                        "modes alone leave residuals (so the modes neither share the detail there nor slide the points "
-                        "elsewhere); 'uniform', the same deviation everywhere (the previous field)")
+    p.add_argument("--detail-amplitude-map", default=None, action=Once, choices=("field", "residual", "uniform"),
+                   help="the detail field's deviation over the skin: 'field' (default), larger where the identity "
+                        "modes alone leave residuals, then where the fitted field is (a few rounds more), so the modes "
+                        "neither share the detail there nor slide the points elsewhere; 'residual', the first step "
+                        "alone; 'uniform', the same deviation everywhere (the previous field)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

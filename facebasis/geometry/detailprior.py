@@ -41,9 +41,8 @@ one per cell of ``INDUCING_CELL l`` (vertex clustering of the template), ``K_zz 
 over the ``J`` largest ``lambda_k``: 300 functions hold 96.5% of the pointwise variance (median vertex) and
 leave 0.004-0.006 cm of the benchmark's fields, for 1.5 s CPU (one dense eigendecomposition of ~1700
 inducing points on ICT). 3D distance, not geodesic: the covariance the unseen vertices' extension uses
-(:mod:`.unseen`, eq. U1); where two surfaces nearly touch (the lips, the lids) they share detail (ICT rig
-benchmark, spectral 150 -> kernel 300: ``reports/registration/README.md``, sixth round). The functions are
-scaled by ``w(x)``, larger where the modes-only fit leaves residuals (:mod:`.fieldamplitude`, eq. D5).
+(:mod:`.unseen`, eq. U1); where two surfaces nearly touch they share detail (spectral 150 -> kernel 300 on ICT:
+``reports/registration/README.md``, sixth round). The functions are scaled by ``w(x)`` (:mod:`.fieldamplitude`).
 
 **The joint fit's data.** The modes-only fit pairs a seeded sample of 5000 vertices (~2800 kept pairs on an
 ICT scan), enough for 100 modes but thin for 400 unknowns; the joint fit pairs every vertex of the part
@@ -96,7 +95,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
-from .fieldamplitude import AMPLITUDE_MAPS, weighted_prior
+from .fieldamplitude import AMPLITUDE_MAPS, refit_on_field, split_rounds, weighted_prior
 from .fieldnormals import fit_along_person_normals, person_normals
 from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 
@@ -172,8 +171,9 @@ class DetailPriorOptions:
         normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's until the joint fit
         has converged once, then a few more rounds along its own; with the fixed prior the modes-only fit's
         throughout); ``"template"``: the template's (the previous pipeline)
-    amplitude_map : ``"residual"`` (the default): the field's deviation ``s w(x)``, ``w`` larger where the modes-only
-        fit leaves residuals (:mod:`.fieldamplitude`, eq. D5); ``"uniform"``: ``s`` everywhere (the previous pipeline)
+    amplitude_map : ``"field"`` (the default): the field's deviation ``s w(x)``, ``w`` larger where the modes-only fit
+        leaves residuals (:mod:`.fieldamplitude`, eq. D5), then where the joint fit's field is (eq. D6, a few rounds
+        more); ``"residual"``: eq. D5 alone; ``"uniform"``: ``s`` everywhere (the previous pipeline)
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
         the modes-only fit, ``ModelFitOptions.iterations``
@@ -189,7 +189,7 @@ class DetailPriorOptions:
     fit_samples: int = 100_000
     fit_iterations: int = 20
     field_normals: str = "person"
-    amplitude_map: str = "residual"
+    amplitude_map: str = "field"
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
@@ -389,13 +389,12 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
     D, choice, prior, w = reg.identity.deltas, None, reg._detail_prior, None
-    if opts.amplitude_map == "residual":   # eq. D5: the field's functions scaled by w(x)
+    if opts.amplitude_map != "uniform":   # eq. D5: the field's functions scaled by w(x)
         prior, w = weighted_prior(prior, plain, plain.vertices[part], surface, icp.vertex_normals, h, fo)
     m = person_normals(P[part], D[:, part], plain.coefficients, icp.vertex_normals) if (
         opts.field_normals == "person") else None                                       # eq. D4
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
-        choice, fo_e = _evidence_choice(plain, prior, P[part], D[:, part], surface, icp.vertex_normals,
-                                        h, fo, m)
+        choice, fo_e = _evidence_choice(plain, prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo, m)
         if np.isfinite(choice.log_evidence):
             s, fo = choice.sd, fo_e
         else:  # the evidence could not be evaluated (a singular normal matrix): the amplitude rule and eq. D2,
@@ -406,8 +405,11 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
                                   reg.options.normal_stage, use=reg.skin)
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
         s = amplitude * offset_rms(out.offset, out.no_surface)
-    fit = fit_with_detail(plain, prior, P[part], D[:, part], surface, icp.vertex_normals, h, s, fo,
-                          start=plain if opts.noise_prior else None, field_normals=m)
+    args, (first, again) = (P[part], D[:, part], surface, icp.vertex_normals, h, s), split_rounds(fo.iterations)
+    fit = fit_with_detail(plain, prior, *args, dataclasses.replace(fo, iterations=first if opts.amplitude_map == "field"
+                          else fo.iterations), start=plain if opts.noise_prior else None, field_normals=m)
+    if opts.amplitude_map == "field" and again and fit is not plain:  # eq. D6: w from the fitted field, its last rounds
+        fit, w = refit_on_field(fit, reg._detail_prior, fit_with_detail, args, dataclasses.replace(fo, iterations=again), m)
     if fit is not plain:
         fit = dataclasses.replace(fit, detail_noise=choice.noise if choice is not None else 0.0, detail_weights=w)
     if reg.skin is None or fit is plain:

@@ -1,4 +1,5 @@
-"""The detail field's amplitude over the skin: larger where the modes-only fit leaves residuals (eq. D5).
+"""The detail field's amplitude over the skin: where the modes-only fit leaves residuals, then where the field is
+(eqs. D5-D6).
 
 The joint fit of :mod:`.detailprior` (eq. D1 / D3) gives the detail field the same pointwise deviation ``s``
 everywhere: a stationary Gaussian process. A person's detail outside an identity space is rarely spread so
@@ -26,19 +27,37 @@ non-stationary process of covariance ``s^2 w(x) w(y) k(x, y)`` (a valid kernel f
 evidence (:mod:`.detailevidence`, eq. E1) still chooses ``s`` and the noise level. A scan within the space
 leaves noise alone: ``w`` ~ 1, and the evidence's ``s`` is near its lower bound anyway.
 
-The vertices no scan sees take the same covariance in their extension (:mod:`.unseen`, eq. U1 with ``w``).
+**Re-estimated from the fitted field** (eq. D6, ``amplitude_map="field"``, the default). The modes-only fit's
+residual is a blurred picture of the detail (the modes took part of it), so after the joint fit ``w`` is estimated
+again by eq. D5 with the joint fit's own field at every vertex of the part in place of the residuals,
+
+    r_i = f(x_i) = m_i . (x_i - b_i)                                                               (eq. D6)
+
+``x`` the joint fit's mesh, ``b = pose(T + c D)`` its modes' mesh and ``m`` its unit normals (one step of an
+EM-like re-estimation of the local variance), and the joint fit's last :data:`ROUNDS` rounds continue from its modes
+and pose with the field from zero (the same ``s``, noise level and eq. D4 normals). The vertices no scan sees take the
+same covariance in their extension (:mod:`.unseen`, eq. U1 with ``w``).
 
 Registered neutral (ICT rig benchmark's neutral scans, ``problems/bench_registration_rig.py``'s persons and scan
-generator, 100 modes; RMS over all 14062 vertices, cm; scratch script re-registering them; the first rule tried, kept
-against the variants below on all twelve persons): ``detail`` seeds 0-5 0.0228 / 0.0181 / 0.0172 / 0.0224 / 0.0212 / 0.0215 ->
-0.0201 / 0.0173 / 0.0150 / 0.0204 / 0.0180 / 0.0181, their tangential part (mean) 0.0174 -> 0.0150; ``in-space``
-0.0086 / 0.0102 / 0.0087 / 0.0098 / 0.0102 / 0.0126 -> 0.0085 / 0.0106 / 0.0088 / 0.0100 / 0.0104 / 0.0126. Also
-tried there: ``c`` 10 (detail mean 0.0184 against 0.0181 with ``c`` 1), half the length in eq. D5 (0.0183), the
-scans' noise variance taken out of ``v`` (0.0178, but it needs the noise level before the evidence gives it).
-On the tests' small face (4497 vertices, a noise-free scan, bumps on the front) the map helps with 150 or 300
-functions (RMS 0.0149 -> 0.0094, 0.0058 -> 0.0032 cm) and not with 60 (0.0294 -> 0.0363): a basis too short to
-carry the detail leaves it to the modes either way. Cost: one pairing round and an (n, 3000) kernel product,
-~0.7 s CPU per ICT neutral (load 12; the whole neutral 7-8.5 s CPU).
+generator, 100 modes; RMS over all 14062 vertices, cm; scratch script re-registering them; eq. D5 alone measured
+with 3000 pairs, eq. D6 with 20 rounds of eq. D5 and 8 more, the default as below for seeds 1 and 3):
+
+| person, seeds 0-5 | uniform | eq. D5 | eq. D5 + D6 |
+|---|---|---|---|
+| ``detail`` RMS | .0228 .0181 .0172 .0224 .0212 .0215 | .0201 .0173 .0150 .0204 .0180 .0181 | .0185 .0157 .0151 .0173 .0148 .0160 |
+| ``detail`` tangential, mean | 0.0174 | 0.0150 | 0.0132 |
+| ``in-space`` RMS | .0086 .0102 .0087 .0098 .0102 .0126 | .0085 .0106 .0088 .0100 .0104 .0126 | .0083 .0100 .0089 .0099 .0103 .0128 |
+
+The default splits the joint fit's 20 rounds as 12 with eq. D5's ``w`` and the last 8 after eq. D6 (:func:`split_rounds`;
+the same CPU as the uniform field's rounds) and samples 1500 pairs: seed 3 ``detail`` 0.0169, seed 1 0.0155, seed 0
+0.0184, seed 1 ``in-space`` 0.0100. Eq. D5 was the first rule tried; also tried there: ``c`` 10 (``detail`` mean
+0.0184 against 0.0181 with ``c`` 1), half the length in eq. D5 (0.0183), the scans' noise variance taken out of
+``v`` (0.0178, but it needs the noise level before the evidence gives it); eq. D6 with a whole second joint fit of
+20 rounds from the modes-only fit: within 0.0006 cm (seed 3 0.0166) for ~2 s CPU more. On the tests' small face
+(4497 vertices, a noise-free scan, bumps on the front) RMS uniform -> eq. D5 -> eq. D6: 0.0058 -> 0.0018 -> 0.0017 cm
+with 300 functions, 0.0149 -> 0.0117 -> 0.0044 with 150, but 0.0294 -> 0.0332 -> 0.0347 with 60 (a basis too short
+to carry the detail leaves it to the modes either way). Cost: two (n, 1500) kernel passes and one pairing round,
+~0.5 s CPU per ICT neutral; the whole neutral 9.1-9.3 s CPU at load 13 with the field's basis (7.8 s uniform).
 """
 
 from __future__ import annotations
@@ -56,9 +75,12 @@ PSEUDO = 1.0
 #: ``w`` is at least this (a part the modes fit to the noise keeps a tenth of the field's deviation)
 FLOOR = 0.1
 #: at most this many of the modes-only fit's pairs (a seeded sample) enter eq. D5
-SAMPLES = 3000
+SAMPLES = 1500
 #: the field's amplitude maps (:class:`.detailprior.DetailPriorOptions`.amplitude_map)
-AMPLITUDE_MAPS = ("residual", "uniform")
+AMPLITUDE_MAPS = ("field", "residual", "uniform")
+#: rounds of the joint fit after ``w`` is re-estimated from its field (eq. D6), continued from its modes: the last of
+#: its ``fit_iterations`` (at most half of them; :func:`split_rounds`)
+ROUNDS = 8
 
 
 def residual_weights(X: np.ndarray, idx: np.ndarray, r: np.ndarray, length: float, pseudo: float = PSEUDO,
@@ -113,4 +135,47 @@ def weighted_prior(prior, fit: ModelFit, X: np.ndarray, surface, normals_of, h: 
     return out, w
 
 
-__all__ = ["AMPLITUDE_MAPS", "FLOOR", "PSEUDO", "SAMPLES", "fit_residual_weights", "residual_weights", "weighted_prior"]
+def split_rounds(iterations: int) -> tuple[int, int]:
+    """``(rounds with eq. D5's w, rounds after eq. D6)`` of a joint fit of ``iterations`` rounds: the last
+    :data:`ROUNDS`, at most half of them (at least one each; one round in all: ``(1, 0)``)."""
+    again = min(ROUNDS, iterations // 2)
+    return max(1, iterations - again), again
+
+
+def refit_on_field(fit: ModelFit, prior, fit_with_detail, args: tuple, options: ModelFitOptions, field_normals):
+    """The joint fit again with ``w`` of eq. D6 (from the field ``fit`` carries), continued from its modes and pose
+    for ``options.iterations`` rounds (:func:`split_rounds`), the field from zero: ``(the new fit, w)``.
+
+    Parameters
+    ----------
+    fit : the joint fit with eq. D5's ``w`` (:func:`.detailprior.fit_with_detail`'s result)
+    prior : the field's basis (:class:`.detailprior.DetailPrior`, unscaled)
+    fit_with_detail : :func:`.detailprior.fit_with_detail` (passed in: that module imports this one)
+    args : its ``(base, deltas, surface, normals_of, h, s)``; options : the joint fit's options (its rounds: these)
+    field_normals : (n, 3) the field's directions of the first fit (eq. D4; None: the template's)
+    """
+    base, deltas, surface, normals_of, h, s = args
+    w = field_weights(fit, base, deltas, normals_of, prior.length)
+    out = copy.copy(prior)
+    out.phi = prior.phi * w[None]
+    return fit_with_detail(fit, out, *args, options, start=fit, field_normals=field_normals), w  # iterations: both fits'
+
+
+def field_weights(fit: ModelFit, base: np.ndarray, deltas: np.ndarray, normals_of, length: float) -> np.ndarray:
+    """``w`` (n,) of eq. D6: eq. D5 with the joint fit's field ``f(x_i)`` at every vertex of the part for the
+    residuals, read off its mesh as the normal offset from its modes' mesh ``pose(T + c D)``.
+
+    Parameters
+    ----------
+    fit : the joint fit (its ``vertices`` include the field), base : (n, 3) the part's template vertices
+    deltas : (K, n, 3) the modes on the part; normals_of : unit vertex normals ``(n, 3) -> (n, 3)``
+    length : the field's length ``l`` (template units; times the fit's scale)
+    """
+    K = len(deltas)
+    M = fit.pose.apply(base + (fit.coefficients[:K] @ deltas.reshape(K, -1)).reshape(base.shape))
+    f = ((fit.vertices - M) * normals_of(M)).sum(1)
+    return residual_weights(M, np.arange(len(M)), f, length * fit.pose.scale)
+
+
+__all__ = ["AMPLITUDE_MAPS", "FLOOR", "PSEUDO", "SAMPLES", "ROUNDS", "field_weights", "fit_residual_weights", "refit_on_field",
+           "residual_weights", "split_rounds", "weighted_prior"]

@@ -171,9 +171,8 @@ class DetailPriorOptions:
         normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's until the joint fit
         has converged once, then a few more rounds along its own; with the fixed prior the modes-only fit's
         throughout); ``"template"``: the template's (the previous pipeline)
-    amplitude_map : ``"field"`` (the default): the field's deviation ``s w(x)``, ``w`` larger where the modes-only fit
-        leaves residuals (:mod:`.fieldamplitude`, eq. D5), then where the joint fit's field is (eq. D6, a few rounds
-        more); ``"residual"``: eq. D5 alone; ``"uniform"``: ``s`` everywhere (the previous pipeline)
+    amplitude_map : ``"field"`` (default): the field's deviation ``s w(x)``, ``w`` from the modes-only fit's residuals, then
+        from the joint fit's field (:mod:`.fieldamplitude`, eqs. D5-D6); ``"residual"``: eq. D5; ``"uniform"``: ``s``
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
         the modes-only fit, ``ModelFitOptions.iterations``
@@ -405,10 +404,11 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
                                   reg.options.normal_stage, use=reg.skin)
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
         s = amplitude * offset_rms(out.offset, out.no_surface)
-    args, (first, again) = (P[part], D[:, part], surface, icp.vertex_normals, h, s), split_rounds(fo.iterations)
-    fit = fit_with_detail(plain, prior, *args, dataclasses.replace(fo, iterations=first if opts.amplitude_map == "field"
-                          else fo.iterations), start=plain if opts.noise_prior else None, field_normals=m)
-    if opts.amplitude_map == "field" and again and fit is not plain:  # eq. D6: w from the fitted field, its last rounds
+    d6 = opts.amplitude_map == "field" and s > (choice.noise if choice is not None else plain.rms)  # detail > noise
+    args, (first, again) = (P[part], D[:, part], surface, icp.vertex_normals, h, s), split_rounds(fo.iterations, d6)
+    fit = fit_with_detail(plain, prior, *args, dataclasses.replace(fo, iterations=first),
+                          start=plain if opts.noise_prior else None, field_normals=m)
+    if again and fit is not plain:  # eq. D6: w from the fitted field, its last rounds
         fit, w = refit_on_field(fit, reg._detail_prior, fit_with_detail, args, dataclasses.replace(fo, iterations=again), m)
     if fit is not plain:
         fit = dataclasses.replace(fit, detail_noise=choice.noise if choice is not None else 0.0, detail_weights=w)

@@ -53,6 +53,10 @@ with 3000 pairs, eq. D6 with 20 rounds of eq. D5 and 8 more, the default as belo
 | ``detail`` tangential, mean | 0.0174 | 0.0150 | 0.0132 |
 | ``in-space`` RMS | .0086 .0102 .0087 .0098 .0102 .0126 | .0085 .0106 .0088 .0100 .0104 .0126 | .0083 .0100 .0089 .0099 .0103 .0128 |
 
+(The ``in-space`` column of eq. D6 is before the ``s > sigma_n`` condition; with it these persons take eq. D5 alone
+at 1500 pairs: .0086 .0104 - .0101 .0106 .0127, tangential .0063 .0090 - .0085 .0090 .0109 against the uniform
+field's .0063 .0088 .0070 .0082 .0085 .0108: up to 0.0004 cm more.)
+
 The default splits the joint fit's 20 rounds as 12 with eq. D5's ``w`` and the last 8 after eq. D6 (:func:`split_rounds`;
 the same CPU as the uniform field's rounds) and samples 1500 pairs: seed 3 ``detail`` 0.0169, seed 1 0.0155, seed 0
 0.0184, seed 1 ``in-space`` 0.0100. Eq. D5 was the first rule tried; also tried there: ``c`` 10 (``detail`` mean

@@ -145,7 +145,7 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
                detail_modes: int = DETAIL_MODES, noise_prior: bool = True, unseen: bool = True,
                detail_basis: str = DETAIL_BASIS, detail_fit: tuple | None = None,
                detail_amplitude: float | str = DETAIL_AMPLITUDE, scan_pairs: int | None = None,
-               field_normals: str = "person") -> tuple[dict, list]:
+               field_normals: str = "person", amplitude_map: str = "field") -> tuple[dict, list]:
     """Register one person's scans with one method; returns (summary row, per-scan rows)."""
     from facebasis.geometry.detailprior import DetailPriorOptions
     from facebasis.geometry.expressionregions import RegionOptions
@@ -170,7 +170,8 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
             "" if detail_basis == DETAIL_BASIS or not detail_modes else f", {detail_basis} basis") + (
             "" if detail_fit is None or not detail_modes else f", joint fit {detail_fit[0]} samples {detail_fit[1]} rounds") + (
             "" if detail_amplitude == DETAIL_AMPLITUDE or not detail_modes else f", amplitude {detail_amplitude:g}") + (
-            "" if field_normals == "person" or not detail_modes else f", {field_normals} normals")
+            "" if field_normals == "person" or not detail_modes else f", {field_normals} normals") + (
+            "" if amplitude_map == "field" or not detail_modes else f", {amplitude_map} amplitude")
         ident = ShapeBasis(tuple(str(s) for s in d["identity_names"][:fit_modes]),
                            d["identity_deltas"][:fit_modes].astype(np.float64), "ICT identity modes")
         expr = ShapeBasis(tuple(names), d["expression_deltas"].astype(np.float64), "ICT expressions")
@@ -181,7 +182,7 @@ def run_method(pp, fit_modes: int | None, seed: int, kind: str, log=print, after
     opts = RegistrationOptions(after_model=after_model, expression_regions=RegionOptions(count=regions), expression_fit=fit,
                                detail=DetailPriorOptions(modes=detail_modes, noise_prior=noise_prior,
                                                          unseen=unseen, basis=detail_basis, amplitude=detail_amplitude,
-                                                         field_normals=field_normals,
+                                                         field_normals=field_normals, amplitude_map=amplitude_map,
                                                          **({} if detail_fit is None else dict(
                                                              fit_samples=detail_fit[0], fit_iterations=detail_fit[1]))))
     reg = Registration(T, F, opts, name="ICT neutral", identity=ident, expressions=expr)
@@ -357,6 +358,11 @@ def main(argv=None):
                     help="DetailPriorOptions.field_normals: the detail field along the person's fitted modes' normals "
                          "(default, eq. D4 of geometry/fieldnormals.py) or the template's (the tables before the "
                          "eighth round)")
+    ap.add_argument("--detail-amplitude-map", choices=("field", "residual", "uniform"), default="field",
+                    help="DetailPriorOptions.amplitude_map: the detail field's deviation larger where the modes-only "
+                         "fit leaves residuals, then where the fitted field is (default, eqs. D5-D6 of "
+                         "geometry/fieldamplitude.py), the first step alone, or the same everywhere (the tables before "
+                         "the ninth round)")
     ap.add_argument("--out", default="reports/registration")
     ap.add_argument("--table-only", action="store_true", help="only rewrite rig.md from the CSV files")
     args = ap.parse_args(argv)
@@ -380,7 +386,8 @@ def main(argv=None):
                                        detail_modes=m, noise_prior=n, unseen=u, detail_basis=b,
                                        detail_fit=args.detail_fit, detail_amplitude=args.detail_amplitude,
                                        scan_pairs=args.expression_scan_pairs,
-                                       field_normals=args.detail_field_normals)
+                                       field_normals=args.detail_field_normals,
+                                       amplitude_map=args.detail_amplitude_map)
                 summary.append(row)
                 scans += rows
                 _write(summary, out / "rig.csv")  # after every method: a long run's finished part is kept

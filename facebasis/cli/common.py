@@ -20,7 +20,7 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "expression_basis": "--expression-basis", "expression_transfer": "--expression-transfer",
          "amplitude": "--amplitude", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
          "detail_basis": "--detail-basis", "detail_amplitude": "--detail-amplitude",
-         "detail_field_normals": "--detail-field-normals",
+         "detail_field_normals": "--detail-field-normals", "detail_amplitude_map": "--detail-amplitude-map",
          "expression_scan_pairs": "--expression-scan-pairs", "expression_pairs_schedule": "--expression-pairs-schedule",
          "rest_anchor": "--rest-anchor", "focal": "--focal", "noise_model": "--noise-model",
          "point_noise": "--point-noise", "gaze": "--gaze",

@@ -38,6 +38,9 @@ def cmd_register(args) -> int:
     if args.detail_field_normals is not None and args.detail_prior == "off":
         raise InputError(f"--detail-field-normals {args.detail_field_normals}: expected together with --detail-prior on "
                          "(the detail field's directions), found --detail-prior off")
+    if args.detail_amplitude_map is not None and args.detail_prior == "off":
+        raise InputError(f"--detail-amplitude-map {args.detail_amplitude_map}: expected together with --detail-prior on "
+                         "(the detail field's deviation over the skin), found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 
@@ -60,7 +63,9 @@ def cmd_register(args) -> int:
                                                          basis=args.detail_basis or DetailPriorOptions.basis,
                                                          amplitude=_amplitude(args.detail_amplitude),
                                                          field_normals=args.detail_field_normals
-                                                         or DetailPriorOptions.field_normals))
+                                                         or DetailPriorOptions.field_normals,
+                                                         amplitude_map=args.detail_amplitude_map
+                                                         or DetailPriorOptions.amplitude_map))
     s = register_files(args.scans, args.template, args.out, lm, args.neutral, opts, log=say(args.command), detector=det,
                        identity_basis=args.identity_basis, expression_basis=args.expression_basis,
                        expression_transfer=args.expression_transfer or "deformation")
@@ -146,6 +151,11 @@ def register(subparsers) -> None:
                         "person's fitted identity modes (the modes-only fit's, then the joint fit's once it has converged); "
                         "'template', the template's normals (the previous field: where the person's surface is tilted "
                         "against the template's, the field's tangential part slides the points)")
+    p.add_argument("--detail-amplitude-map", default=None, action=Once, choices=("field", "residual", "uniform"),
+                   help="the detail field's deviation over the skin: 'field' (default), larger where the identity "
+                        "modes alone leave residuals, then where the fitted field is (a few rounds more), so the modes "
+                        "neither share the detail there nor slide the points elsewhere; 'residual', the first step "
+                        "alone; 'uniform', the same deviation everywhere (the previous field)")
     p.add_argument("--identity-prior", default=None, action=Once, choices=("noise", "fixed"),
                    help="the coefficients' prior of the identity fit with the detail prior: 'noise' (default) "
                         "continues the fit with the prior at the noise level of the scan's residual (a fixed strong "

@@ -33,6 +33,7 @@ normalstage  offsets along a fitted model's normals only (after a shape-model fi
 detailprior  the identity fit with a smooth normal field outside the space (a Gaussian-process prior, manifold harmonics)
 detailevidence  the field's deviation and the scan's noise level per scan by the evidence of the linearised joint fit
 fieldnormals  the detail field along the person's fitted modes' normals, not the template's (eq. D4: no slide along the skin)
+fieldamplitude  the detail field's deviation over the skin, larger where the modes alone leave residuals (eq. D5)
 unseen      the registered neutral where no scan sees (sockets, holes): the seen detail extended in 3D (GP mean)
 scanlandmarks  landmarks found on a scan: front render, a 2D detector object, ray lift onto the surface
 raster      flat-shaded numpy rasterisation of a mesh into an image (preview videos; no OpenGL)

@@ -41,22 +41,18 @@ one per cell of ``INDUCING_CELL l`` (vertex clustering of the template), ``K_zz 
 over the ``J`` largest ``lambda_k``: 300 functions hold 96.5% of the pointwise variance (median vertex) and
 leave 0.004-0.006 cm of the benchmark's fields, for 1.5 s CPU (one dense eigendecomposition of ~1700
 inducing points on ICT). 3D distance, not geodesic: the covariance the unseen vertices' extension uses
-(:mod:`.unseen`, eq. U1); where two surfaces nearly touch (the lips, the lids) they share detail. Registered
-neutral of the ICT rig benchmark's ``detail`` persons, RMS over all vertices (spectral 150 -> kernel 300,
-the joint fit otherwise as before): seed 0 0.0456 -> 0.0319 cm, seed 1 0.0376 -> 0.0323, seed 3 0.0529 ->
-0.0423; in-space persons 0.0143 -> 0.0148, 0.0164 -> 0.0168.
+(:mod:`.unseen`, eq. U1); where two surfaces nearly touch they share detail (spectral 150 -> kernel 300 on ICT:
+``reports/registration/README.md``, sixth round). The functions are scaled by ``w(x)`` (:mod:`.fieldamplitude`).
 
 **The joint fit's data.** The modes-only fit pairs a seeded sample of 5000 vertices (~2800 kept pairs on an
 ICT scan), enough for 100 modes but thin for 400 unknowns; the joint fit pairs every vertex of the part
 (``fit_samples``; ~8000 pairs) and, its data term being a mean over them, takes eq. D2 with its own pair count
 (the modes-only fit's kept share of its candidates). Same persons, kernel 300: every vertex 0.0319 -> 0.0273
 (seed 0), 0.0323 -> 0.0254 (seed 1), 0.0423 -> 0.0349 (seed 3), in-space 0.0148 -> 0.0107, 0.0168 -> 0.0130;
-with eq. D2 for the pair count (the default) 0.0266, 0.0212, 0.0342, in-space 0.0114, 0.0133 (a ten times weaker
-prior: 0.0260, 0.0217, in-space 0.0150; 8000 candidates instead of all: 0.0284, 0.0290). In-space seed 3 is worse,
-0.0143 -> 0.0175 (the kernel basis alone too): at ``s`` from the modes-only fit's offsets, which for a person in the
-space are that fit's shrinkage more than detail, the richer field takes some of the modes' part. Twenty rounds settle
-it (40: the same within 0.0002 cm). Held as :class:`ModesAndField`, the joint fit costs 2.5 s CPU (4.7 s with the
-dense (400, n, 3) basis); the whole neutral 7.5-8 s CPU at load ~15 (scratch scripts on the benchmark's scans).
+with eq. D2 for the pair count (the default) 0.0266, 0.0212, 0.0342, in-space 0.0114, 0.0133. In-space seed 3 is
+worse, 0.0143 -> 0.0175 (the kernel basis alone too): at ``s`` from the modes-only fit's offsets, which for a person in
+the space are that fit's shrinkage more than detail, the richer field takes some of the modes' part. Twenty rounds
+settle it (40: within 0.0002 cm). Held as :class:`ModesAndField`, the joint fit costs 2.5 s CPU (4.7 s dense).
 
 **The coefficients' prior at the noise level** (eq. D2). The fit's energy weighs the prior by a fixed
 ``mu`` (:class:`.shapemodel.ModelFitOptions`, 1e-4: strong enough to find the basin from the
@@ -99,6 +95,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import InputError, parameter_error
 from .laplacian import cotangent_laplacian, lumped_mass
+from .fieldamplitude import AMPLITUDE_MAPS, refit_on_field, split_rounds, weighted_prior
 from .fieldnormals import fit_along_person_normals, person_normals
 from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 
@@ -174,6 +171,8 @@ class DetailPriorOptions:
         normals of the person's modes mesh ``T + sum_k c_k D_k`` (eq. D4: the modes-only fit's until the joint fit
         has converged once, then a few more rounds along its own; with the fixed prior the modes-only fit's
         throughout); ``"template"``: the template's (the previous pipeline)
+    amplitude_map : ``"field"`` (default): the field's deviation ``s w(x)``, ``w`` from the modes-only fit's residuals, then
+        from the joint fit's field (:mod:`.fieldamplitude`, eqs. D5-D6); ``"residual"``: eq. D5; ``"uniform"``: ``s``
     fit_iterations : rounds of the joint fit at most when it continues from the modes-only fit (``noise_prior``;
         it settles in fewer: 20 and 40 gave the same ICT neutrals within 0.0002 cm RMS); from the template, and
         the modes-only fit, ``ModelFitOptions.iterations``
@@ -189,6 +188,7 @@ class DetailPriorOptions:
     fit_samples: int = 100_000
     fit_iterations: int = 20
     field_normals: str = "person"
+    amplitude_map: str = "field"
 
     def __post_init__(self):
         if isinstance(self.modes, bool) or not (isinstance(self.modes, (int, np.integer)) and self.modes >= 0):
@@ -207,11 +207,9 @@ class DetailPriorOptions:
             u = getattr(self, k)
             if isinstance(u, bool) or not (isinstance(u, (int, np.integer)) and u >= 1):
                 raise InputError(f"detail.{k}: expected an integer >= 1, found {u!r}")
-        if self.field_normals not in FIELD_NORMALS:
-            raise parameter_error("detail_field_normals", f"one of {', '.join(FIELD_NORMALS)}", repr(self.field_normals),
-                                  label="detail.field_normals")
-        if self.basis not in BASES:
-            raise parameter_error("detail_basis", f"one of {', '.join(BASES)}", repr(self.basis), label="detail.basis")
+        for k, ok in (("field_normals", FIELD_NORMALS), ("amplitude_map", AMPLITUDE_MAPS), ("basis", BASES)):
+            if getattr(self, k) not in ok:
+                raise parameter_error(f"detail_{k}", f"one of {', '.join(ok)}", repr(getattr(self, k)), label=f"detail.{k}")
 
 
 class DetailPrior:
@@ -389,12 +387,13 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     icp = reg.nricp if reg.skin is None else reg._skin_icp
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
-    D, choice = reg.identity.deltas, None
+    D, choice, prior, w = reg.identity.deltas, None, reg._detail_prior, None
+    if opts.amplitude_map != "uniform":   # eq. D5: the field's functions scaled by w(x)
+        prior, w = weighted_prior(prior, plain, plain.vertices[part], surface, icp.vertex_normals, h, fo)
     m = person_normals(P[part], D[:, part], plain.coefficients, icp.vertex_normals) if (
         opts.field_normals == "person") else None                                       # eq. D4
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
-        choice, fo_e = _evidence_choice(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals,
-                                        h, fo, m)
+        choice, fo_e = _evidence_choice(plain, prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo, m)
         if np.isfinite(choice.log_evidence):
             s, fo = choice.sd, fo_e
         else:  # the evidence could not be evaluated (a singular normal matrix): the amplitude rule and eq. D2,
@@ -405,10 +404,14 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
                                   reg.options.normal_stage, use=reg.skin)
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
         s = amplitude * offset_rms(out.offset, out.no_surface)
-    fit = fit_with_detail(plain, reg._detail_prior, P[part], D[:, part], surface, icp.vertex_normals, h, s, fo,
+    d6 = opts.amplitude_map == "field" and s > (choice.noise if choice is not None else plain.rms)  # detail > noise
+    args, (first, again) = (P[part], D[:, part], surface, icp.vertex_normals, h, s), split_rounds(fo.iterations, d6)
+    fit = fit_with_detail(plain, prior, *args, dataclasses.replace(fo, iterations=first),
                           start=plain if opts.noise_prior else None, field_normals=m)
-    if choice is not None:
-        fit = dataclasses.replace(fit, detail_noise=choice.noise)
+    if again and fit is not plain:  # eq. D6: w from the fitted field, its last rounds
+        fit, w = refit_on_field(fit, reg._detail_prior, fit_with_detail, args, dataclasses.replace(fo, iterations=again), m)
+    if fit is not plain:
+        fit = dataclasses.replace(fit, detail_noise=choice.noise if choice is not None else 0.0, detail_weights=w)
     if reg.skin is None or fit is plain:
         return fit
     X = fit.pose.apply(P + (fit.coefficients @ D.reshape(len(D), -1)).reshape(P.shape))
@@ -443,6 +446,5 @@ def detail_report(fit: ModelFit) -> dict:
                              "noise_template_units": float(fit.detail_noise) if fit.detail_noise > 0 else None}}
 
 
-__all__ = ["AUTO_FIXED_PRIOR", "BASES", "FIELD_NORMALS", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField", "NOISE_PRIOR_FLOOR", "detail_report",
-           "fit_with_detail", "identity_fit_with_detail",
-           "noise_prior", "offset_rms"]
+__all__ = ["AUTO_FIXED_PRIOR", "BASES", "FIELD_NORMALS", "DetailPrior", "DetailPriorOptions", "INDUCING_CELL", "ModesAndField",
+           "NOISE_PRIOR_FLOOR", "detail_report", "fit_with_detail", "identity_fit_with_detail", "noise_prior", "offset_rms"]

@@ -197,6 +197,8 @@ class ModelFit:
         :mod:`.detailprior`; 0: none)
     detail_noise : the residuals' deviation ``sigma_n`` chosen with ``s`` by the evidence (eq. E1 of
         :mod:`.detailevidence`; 0: ``s`` was not chosen so)
+    detail_weights : (n_part,) the field's deviation over the fitted part relative to ``s`` (``w`` of eq. D5 of
+        :mod:`.fieldamplitude`); None: ``s`` everywhere
     """
 
     vertices: np.ndarray
@@ -207,6 +209,7 @@ class ModelFit:
     iterations: int
     detail_sd: float = 0.0
     detail_noise: float = 0.0
+    detail_weights: np.ndarray | None = None
 
 
 def _pairs(X, normals, surface, dmax, cos_max, use, floor):

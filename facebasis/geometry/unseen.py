@@ -51,7 +51,7 @@ NUGGET_FLOOR = 1e-3
 
 def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, seen: np.ndarray,
                          unseen: np.ndarray, length: float, noise_ratio: float, samples: int = 2000,
-                         seed: int = 0) -> np.ndarray:
+                         seed: int = 0, weights: np.ndarray | None = None) -> np.ndarray:
     """The mesh ``X`` with its unseen vertices replaced by ``base`` plus the seen normal offset's
     extension along ``normals`` (eq. U1 of the module docstring).
 
@@ -63,6 +63,8 @@ def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, s
     length : ``l`` (``X``'s units)
     noise_ratio : ``(sigma_n / s)^2``, the nugget relative to the prior's variance (at least ``NUGGET_FLOOR``)
     samples : at most this many seen vertices condition the extension (a seeded sample)
+    weights : (n,) the prior's deviation relative to ``s`` over the vertices (``w`` of eq. D5 of
+        :mod:`.fieldamplitude`: the covariance ``w(x) w(y) k(x, y)``); None: 1 everywhere
 
     Returns
     -------
@@ -77,10 +79,11 @@ def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, s
     if len(a) > samples:
         a = np.sort(np.random.default_rng(seed).choice(a, samples, replace=False))
     f = ((X[a] - base[a]) * normals[a]).sum(1)
-    K = np.exp(-cdist(base[a], base[a], "sqeuclidean") / (2.0 * length ** 2))
+    w = np.ones(len(X)) if weights is None else np.asarray(weights, float)
+    K = np.exp(-cdist(base[a], base[a], "sqeuclidean") / (2.0 * length ** 2)) * np.outer(w[a], w[a])
     K[np.diag_indices_from(K)] += max(noise_ratio, NUGGET_FLOOR)
     alpha = cho_solve(cho_factor(K), f)
-    fu = np.exp(-cdist(base[u], base[a], "sqeuclidean") / (2.0 * length ** 2)) @ alpha
+    fu = w[u] * (np.exp(-cdist(base[u], base[a], "sqeuclidean") / (2.0 * length ** 2)) @ (w[a] * alpha))
     Y = X.copy()
     Y[u] = base[u] + fu[:, None] * normals[u]
     return Y
@@ -109,9 +112,14 @@ def extend_unseen(reg, fit, res, surface, identity_fit: bool):
     if reg.skin is not None:  # the other parts (eyeballs, teeth) stay where the fit put them
         unseen[:] = False
         unseen[reg.skin] = res.no_surface[reg.skin]
+    w = getattr(fit, "detail_weights", None)
+    if w is not None and reg.skin is not None:  # over the skin: the other parts' weights do not enter
+        full = np.ones(len(base))
+        full[reg.skin] = w
+        w = full
     X = extend_normal_offset(res.vertices, base, reg.nricp.vertex_normals(base), ~res.no_surface, unseen,
                              reg._detail_prior.length * fit.pose.scale, noise_ratio,
-                             opts.unseen_samples)
+                             opts.unseen_samples, weights=w)
     if X is res.vertices:
         return res
     dist = res.distance.copy()

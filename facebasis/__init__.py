@@ -23,6 +23,6 @@ from .geometry.transfer import DeformationTransfer, deformation_transfer
 from ._version import __version__  # noqa: E402
 
 __all__ = [
-    "FacebasisError", "InputError", "MeshError", "RigError", "SolverError", "TopologyError",
+    "__version__", "FacebasisError", "InputError", "MeshError", "RigError", "SolverError", "TopologyError",
     "Rig", "load_rig_folder", "write_rig_folder", "DeformationTransfer", "deformation_transfer",
 ]

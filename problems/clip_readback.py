@@ -26,7 +26,8 @@ read-back over the frames on the rest image's box only (``r_clip_rest_box``).
 
 ``alone`` against ``together`` is the cost of several features moving at once (cross-talk in the detector's
 fit); ``together`` against ``clip`` the cost of the capture mesh's interior; ``floor`` the cost of the clip's
-small amplitudes against the detector's noise. Output: ``clip_readback.csv`` / ``.md``.
+small amplitudes against the detector's noise. Output: ``clip_readback.csv`` / ``.md``, and
+``clip_readback_summary.csv`` / ``.md`` (per image, reader and measure, the medians over the clips).
 """
 
 from __future__ import annotations
@@ -109,6 +110,25 @@ def replay_rows(cap, clip: str, image_name: str, image, landmarks, readers: dict
     return rows
 
 
+#: the summary's columns: medians over the clips of each (image, reader, measure)
+SUMMARY = ("floor", "r_alone", "r_together", "r_clip", "box_other")
+
+
+def summary_rows(rows: list[dict]) -> list[dict]:
+    """Per (image, reader, measure), in the rows' order: the median over the clips of :data:`SUMMARY` (NaN-aware)
+    and the clips' count."""
+    keys = list(dict.fromkeys((r["image"], r["reader"], r["feature"]) for r in rows))
+    out = []
+    for image, reader, feat in keys:
+        sel = [r for r in rows if (r["image"], r["reader"], r["feature"]) == (image, reader, feat)]
+        row = {"image": image, "reader": reader, "feature": feat, "clips": len(sel)}
+        for c in SUMMARY:
+            v = np.array([float(r[c]) for r in sel])
+            row[c] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
+        out.append(row)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("captures", nargs="+")
@@ -138,6 +158,7 @@ def main(argv=None):
                 rows.append(row)
                 print(row_text(row), flush=True)
     write_rows_table(args.out, "clip_readback", rows)
+    write_rows_table(args.out, "clip_readback_summary", summary_rows(rows))
 
 
 if __name__ == "__main__":

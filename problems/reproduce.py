@@ -479,7 +479,8 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("clip-readback", "Why a detector reads the warped targets well on a ramp and poorly on a clip: 48 frames of "
            "each capture replayed on every target as animated, through the target's own landmark mesh with every "
            "feature moving, and with one feature alone; each detector's still noise and dlib's face-box scale flips",
-           ("reproduction/clip_readback.csv", "reproduction/clip_readback.md"),
+           ("reproduction/clip_readback.csv", "reproduction/clip_readback.md",
+            "reproduction/clip_readback_summary.csv", "reproduction/clip_readback_summary.md"),
            CAPTURES + TRACKED + (f"{PY} problems.clip_readback {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
                                  "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --frames 48 --out reports/reproduction",),
            data=("video", "detect", "mediapipe"), script="problems/clip_readback.py"),

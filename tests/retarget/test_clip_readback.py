@@ -54,3 +54,15 @@ def test_replay_rows_one_row_per_reader_and_measure():
         assert r["frames"] == len(P) and r["detected"] == len(P)
         assert r["sd_warp"] > 0 and 0 < r["floor"] < 1
         assert not abs(r["r_clip"]) > 1e-6 and np.isnan(r["box_other"])      # a constant reading follows nothing
+
+
+def test_summary_takes_the_median_over_the_clips():
+    from problems.clip_readback import SUMMARY, summary_rows
+
+    base = {c: float("nan") for c in SUMMARY}
+    rows = [{**base, "clip": c, "image": "a", "reader": "dlib", "feature": "eye_open", "r_clip": v, "floor": 0.9}
+            for c, v in (("x", 0.1), ("y", 0.5), ("z", 0.3))]
+    rows.append({**base, "clip": "x", "image": "b", "reader": "dlib", "feature": "eye_open", "r_clip": 0.7})
+    out = summary_rows(rows)
+    assert [(r["image"], r["clips"]) for r in out] == [("a", 3), ("b", 1)]
+    assert out[0]["r_clip"] == 0.3 and out[0]["floor"] == 0.9 and np.isnan(out[0]["r_alone"])

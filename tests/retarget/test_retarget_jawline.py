@@ -39,11 +39,12 @@ def test_contour_follows_the_lower_lip_and_ignores_its_own_sideways_slide():
     drop = np.linspace(0.0, 5.0, T)
     out = jaw_from_lips(_opening(rest, drop) + (_turning(rest, shift) - rest), rest)     # opens while turning
     assert out[:, 8, 1] - rest[8, 1] == pytest.approx(drop)       # the chin with the lip
-    assert out[:, 4, 1] - rest[4, 1] == pytest.approx(drop / 2)
-    assert np.abs(out[:, [0, 16]] - rest[[0, 16]]).max() < 1e-12  # the ends at the ears still
+    assert out[:, 6, 1] - rest[6, 1] == pytest.approx(drop)
+    assert out[:, 11, 1] - rest[11, 1] == pytest.approx(drop / 2)
+    assert np.abs(out[:, np.r_[0:5, 12:17]] - rest[np.r_[0:5, 12:17]]).max() < 1e-12  # jaw angles to the ears still
     assert np.array_equal(out[:, 17:], _opening(rest, drop)[:, 17:])
     w = contour_weights()
-    assert w[8] == 1 and w[0] == w[16] == 0 and np.allclose(w, w[::-1])
+    assert w[8] == 1 and w[0] == w[16] == 0 and np.allclose(w, w[::-1]) and w.tolist().count(1.0) == 5
 
 
 def test_jaw_from_lips_refuses_other_shapes():

@@ -17,13 +17,14 @@ The contour's expression part is the jaw opening: the chin rides the mandible wi
 68 landmarks each contour point moves by ``w_i`` times the outer lower lip's displacement (iBUG 56-58,
 their mean)::
 
-    c_i(t) = c_i(0) + w_i (m(t) - m(0)),   w_i = 1 (i = 6..10), 1/2 (i = 5, 11), 0 otherwise
+    c_i(t) = c_i(0) + w_i (m(t) - m(0)),   w_i = 1 (i = 6..10), 0 otherwise
 
 the chin moving with the lip as in :mod:`problems.cartoon_readback`'s mouth-opening ramp (iBUG 6-10 drop
-with the lower lip), half of it at the next points, the rest of the contour (the jaw's angles, the cheeks and
-temples up to the ears) still. A taper from the chin to the ears (``w_i = 1 - |i - 8| / 8``) was measured
-first and is worse: it pulls the cheeks down with the lip, and on the mouth-opening ramp dlib's reading of the
-turned cameraman fell from r 0.61 to 0.21 (the painted astronaut 0.98 -> 0.95, MediaPipe 0.96 -> 0.91).
+with the lower lip; on those ramps the contour is the ramp's own, the read-back unchanged), the rest of the
+contour (the jaw's angles, the cheeks and temples up to the ears) still. Measured and worse on the ramps:
+a taper from the chin to the ears (``w_i = 1 - |i - 8| / 8``) pulls the cheeks down with the lip (dlib's
+reading of the turned cameraman's opening r 0.61 -> 0.21, the painted astronaut 0.98 -> 0.95, MediaPipe
+0.96 -> 0.91); half of the lip's motion at 5 and 11 still lowered it (0.61 -> 0.48, astronaut gain 1.02 -> 0.84).
 The lower lip's own motion is unchanged.
 """
 
@@ -48,9 +49,8 @@ def parse_jaw_mode(jaw: str) -> str:
 
 
 def contour_weights() -> np.ndarray:
-    """(17,) how much of the lower lip's motion each contour point takes: 1 at iBUG 6-10, 1/2 at 5 and 11, else 0."""
-    d = np.abs(CONTOUR_68 - CHIN_68)
-    return np.where(d <= 2, 1.0, np.where(d == 3, 0.5, 0.0))
+    """(17,) how much of the lower lip's motion each contour point takes: 1 at iBUG 6-10, else 0."""
+    return (np.abs(CONTOUR_68 - CHIN_68) <= 2).astype(np.float64)
 
 
 def jaw_from_lips(vertices, rest) -> np.ndarray:

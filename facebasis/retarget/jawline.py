@@ -4,8 +4,8 @@
 image plane is not a similarity, and on the 68-point iBUG set it shows most on the face contour (the jaw
 line, points 0-16): the contour slides sideways as the head turns left or right and moves against the eyes as
 it nods. What is left of the contour once the similarity is out is therefore mostly head motion, not
-expression. Measured on the shared clips' four captures (dlib and tracking only, :mod:`problems.clip_readback`'s
-recipe), in eye-corner distances: the contour's sideways shift has a standard deviation of 0.058-0.064 and
+expression. Measured on the shared clips' four captures (dlib and tracking only; each capture's own
+landmarks with the similarity out), in eye-corner distances: the contour's sideways shift has a standard deviation of 0.058-0.064 and
 follows the nose tip's sideways offset from the inner eye corners (a yaw measure) at r -0.71 to -0.93; its
 width changes by 0.04-0.06 with no relation to the mouth (|r| <= 0.1); the mouth opening itself moves by
 0.03-0.055. Drawn on a still cartoon, that motion is a face outline swinging under a frontal face, and

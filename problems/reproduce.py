@@ -480,6 +480,14 @@ RECIPES: tuple[Recipe, ...] = (
            CAPTURES + TRACKED + (f"{PY} problems.capture_features cap12={{tmp}}/cap12_edit_det,{{tmp}}/cap12_edit_track "
                                  "cap13={tmp}/cap13_edit2_det,{tmp}/cap13_edit2_track --out reports/reproduction",),
            data=("video", "detect", "mediapipe"), script="problems/capture_features.py"),
+    Recipe("clip-readback", "Why a detector reads the warped targets well on a ramp and poorly on a clip: 48 frames of "
+           "each capture replayed on every target as animated, through the target's own landmark mesh with every "
+           "feature moving, and with one feature alone; each detector's still noise and dlib's face-box scale flips",
+           ("reproduction/clip_readback.csv", "reproduction/clip_readback.md",
+            "reproduction/clip_readback_summary.csv", "reproduction/clip_readback_summary.md"),
+           CAPTURES + TRACKED + (f"{PY} problems.clip_readback {{tmp}}/cap12_edit_det {{tmp}}/cap13_edit2_det "
+                                 "{tmp}/cap12_edit_track {tmp}/cap13_edit2_track --frames 48 --out reports/reproduction",),
+           data=("video", "detect", "mediapipe"), script="problems/clip_readback.py"),
     Recipe("cartoon-readback", "Known expression ramps warped onto every target image and read back by dlib and "
            "MediaPipe, with each detector's still noise on the image: which measures a detector can see on a drawn, "
            "photographed or painted face",

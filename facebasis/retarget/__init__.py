@@ -20,6 +20,7 @@ mouthpaint an open mouth painted as a mouth: upper teeth, a cavity darkest at th
 eyepaint   a closing eye painted as a lid coming down over it, with a lash line at its edge
 foldfree   fold-free 2D mesh deformation (bounded-distortion projection, local/global, exact check)
 headmotion the head's per-frame similarity apart from the expression (Procrustes on stable landmarks)
+jawline    the face contour of a still head: it follows the lower lip, not the head's turns
 featurescale eq. 12 per feature: each eye and the mouth moved in the target's own proportions
 drive3d    biharmonic mesh driving by landmark vertices (:class:`MeshDriver`)
 rigdrive   rig weights + head pose from 2D landmarks (:class:`RigRetargeter`)

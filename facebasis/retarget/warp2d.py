@@ -198,6 +198,9 @@ class CartoonAnimator:
         proportions on the target, the brows with their eyes (:mod:`.featurescale`, eq. 12 per
         feature, 68 landmarks; with another landmark set ``self.amplitude`` becomes "uniform"); "uniform":
         one eq. 13 scale for the whole face, as the paper
+    jaw : "lips" (default): in :meth:`drive`, with 68 landmarks, the face contour follows the lower lip
+        instead of the captured contour, whose motion on a still head is mostly the head turning
+        (:mod:`.jawline`); "capture": the captured contour
 
     Attributes
     ----------
@@ -207,13 +210,15 @@ class CartoonAnimator:
 
     def __init__(self, image, image_landmarks, capture_landmarks, capture_vertices, faces, c: float | None = None,
                  border: float = 0.4, head: str = "still", fold_free: bool = True, interior: str = "smooth",
-                 amplitude: str = "feature"):
+                 amplitude: str = "feature", jaw: str = "lips"):
         from .featurescale import parse_amplitude
         from .headmotion import parse_head_mode
+        from .jawline import parse_jaw_mode
 
         self.image = _check_image(image)
         self.head_mode = parse_head_mode(head)
         self.amplitude = parse_amplitude(amplitude)
+        self.jaw = parse_jaw_mode(jaw)
         lm_img = np.asarray(image_landmarks, np.float64)
         lm_cap = np.asarray(capture_landmarks, np.float64)
         if lm_img.shape != lm_cap.shape:
@@ -275,7 +280,8 @@ class CartoonAnimator:
         fold-free solve per frame where it is needed).
 
         1. the head's similarity per frame (:func:`.headmotion.fit_head_motion`, stable landmarks
-           against the first frame) is taken out of the captured vertices;
+           against the first frame) is taken out of the captured vertices; with ``jaw`` "lips" the face
+           contour then follows the lower lip (:func:`.jawline.jaw_from_lips`);
         2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``, with ``amplitude`` "feature" each eye
            and the mouth by its own 2x2 map (a brow with its eye) instead of ``s``
            (:mod:`.featurescale`, from the capture's frame 0, the frame the correspondence is
@@ -304,6 +310,10 @@ class CartoonAnimator:
                              f"found {lm.shape}")
         motion = fit_head_motion(lm, self.capture_landmarks)
         V = motion.remove(V)
+        if self.jaw == "lips" and len(self.capture_landmarks) == 68:    # the contour: jaw opening, not head turns
+            from .jawline import jaw_from_lips
+
+            V = jaw_from_lips(V, self.capture_rest)
         if self.amplitude == "feature":                       # eq. 12 per feature
             from .featurescale import feature_maps
 
@@ -389,7 +399,7 @@ class CartoonAnimation:
 
 def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices, faces, c=None,
                     border: float = 0.4, head: str = "still", fold_free: bool = True,
-                    interior: str = "smooth", amplitude: str = "feature") -> CartoonAnimation:
+                    interior: str = "smooth", amplitude: str = "feature", jaw: str = "lips") -> CartoonAnimation:
     """One-off: animate ``image`` by captured vertices (T, N, 2) (:meth:`CartoonAnimator.drive`).
 
     ``capture_landmarks`` is (T, L, 2) (frame 0 trains the RBF, all frames give the head's
@@ -400,7 +410,7 @@ def animate_cartoon(image, image_landmarks, capture_landmarks, capture_vertices,
     lm = np.asarray(capture_landmarks, np.float64)
     lm_all = lm if lm.ndim == 3 else V[:, :len(lm)]
     anim = CartoonAnimator(image, image_landmarks, lm_all[0], V[0], faces, c, border, head, fold_free, interior,
-                           amplitude)
+                           amplitude, jaw)
     drive = anim.drive(V, lm_all)
     frames = np.stack([anim.frame_at(drive, t) for t in range(len(V))])
     return CartoonAnimation(frames, drive.meshes, anim.faces, anim.scale, anim.rest)

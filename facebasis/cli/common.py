@@ -18,7 +18,7 @@ FLAGS = {"iterations": "--iterations", "alpha": "--alpha", "lam": "--lambda", "s
          "head": "--head", "ridge": "--ridge", "identity": "--identity", "first_frame_neutral": "--first-frame-neutral",
          "region": "--region", "max_frames": "--max-frames", "fps": "--fps", "identity_basis": "--identity-basis",
          "expression_basis": "--expression-basis", "expression_transfer": "--expression-transfer",
-         "amplitude": "--amplitude", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
+         "amplitude": "--amplitude", "jaw": "--jaw", "expression_regions": "--expression-regions", "detail_modes": "--detail-modes",
          "detail_basis": "--detail-basis", "detail_amplitude": "--detail-amplitude",
          "detail_field_normals": "--detail-field-normals", "detail_amplitude_map": "--detail-amplitude-map",
          "expression_scan_pairs": "--expression-scan-pairs", "expression_pairs_schedule": "--expression-pairs-schedule",

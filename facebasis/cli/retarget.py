@@ -20,7 +20,7 @@ def cmd_animate2d(args) -> int:
     from ..retarget.pipeline import run_animate2d
 
     s = run_animate2d(args.capture, args.out, args.image, args.landmarks, head=args.head, log=say(args.command),
-                      amplitude=args.amplitude)
+                      amplitude=args.amplitude, jaw=args.jaw)
     beside = f", beside {s['video_beside']}" if s["video_beside"] else ""
     print(f"animated {s['frames']} frames ({s['warp_ms_per_frame']:.1f} ms per frame warp{beside}) -> {args.out}")
     return 0
@@ -113,6 +113,10 @@ def register(subparsers) -> None:
                         "cartoon's own proportions, the brows with their eyes, e.g. a cartoon eye twice as tall "
                         "closes by twice as much; "
                         "uniform: one scale for the whole face, the paper's eq. 12-13)")
+    p.add_argument("--jaw", default=None, action=Once, metavar="lips|capture",
+                   help="the face contour on a head held still (default lips: it follows the lower lip, so the "
+                        "chin drops as the mouth opens and head turns do not swing the outline; capture: the "
+                        "captured contour, turns included)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),
                                                       derived=_capture_video))

@@ -41,11 +41,11 @@ JAW_MODES = ("lips", "capture")
 CONTOUR_68, CHIN_68, LOWER_LIP_68 = np.arange(17), 8, np.array([56, 57, 58])
 
 
-def parse_jaw_mode(jaw: str) -> str:
-    """``jaw`` checked against :data:`JAW_MODES`."""
-    if jaw not in JAW_MODES:
-        raise InputError(f"jaw: expected one of {', '.join(JAW_MODES)}, found {jaw!r}")
-    return jaw
+def parse_jaw_mode(jaw) -> str:
+    """``jaw`` checked against :data:`JAW_MODES` (None: "lips")."""
+    from ..errors import parse_mode
+
+    return parse_mode("jaw", jaw, JAW_MODES, "lips")
 
 
 def contour_weights() -> np.ndarray:

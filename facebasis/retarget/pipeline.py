@@ -22,7 +22,7 @@ from .rigrun import _log, _write_previews, load_retarget_rig, pose_csv, run_reta
 # 2D
 
 def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds: float = 4.0, head: str = "still",
-                  log=None, amplitude: str = "feature") -> dict:
+                  log=None, amplitude: str = "feature", jaw: str = "lips") -> dict:
     """Animate a cartoon image (default: the built-in cartoon) by a capture folder.
 
     Writes ``cartoon.mp4`` (the source video's frames beside the cartoon when the capture records
@@ -30,7 +30,8 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
     faces), ``cartoon_rest.png`` and ``summary.json``. ``head``: "still" (the cartoon shows the
     expression only) or "follow" (it also moves with the head), see :meth:`.CartoonAnimator.drive`.
     ``amplitude``: "feature" (each eye and the mouth in the cartoon's own proportions,
-    :mod:`.featurescale`) or "uniform" (the paper's one scale). No frame is written with a triangle
+    :mod:`.featurescale`) or "uniform" (the paper's one scale). ``jaw``: "lips" (the face contour follows the
+    lower lip, not the head's turns, :mod:`.jawline`) or "capture". No frame is written with a triangle
     of the warp mesh flipped against the rest cartoon.
     """
     from .files import read_image, read_points2d
@@ -42,6 +43,9 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
 
     head = parse_head_mode(head)
     amplitude = parse_amplitude(amplitude)
+    from .jawline import parse_jaw_mode
+
+    jaw = parse_jaw_mode(jaw)
     cap = read_capture(capture_dir)
     if (image is None) != (landmarks is None):
         raise InputError(what="{image} and {landmarks}", expected="both (a cartoon and its landmarks) or neither "
@@ -63,7 +67,8 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
                              f"count), found {len(pts)}")
         img, what = read_image(image), str(image)
     t0 = time.perf_counter()
-    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head, amplitude=amplitude)
+    anim = CartoonAnimator(img, pts, cap.landmarks[0], cap.vertices[0], cap.faces, head=head, amplitude=amplitude,
+                            jaw=jaw)
     if anim.amplitude != amplitude:
         _log(log, f"amplitude: 'feature' needs the 68 iBUG landmarks, found {cap.n_landmarks}: eq. 12's single "
                   "scale is used (amplitude uniform)")
@@ -109,7 +114,7 @@ def run_animate2d(capture_dir, out_dir, image=None, landmarks=None, gif_seconds:
             raise InputError(f"cartoon image: OpenCV could not encode it as PNG ({img.shape}, {img.dtype})")
         atomic_write_bytes(stage / "cartoon_rest.png", png.tobytes())
         summary = {"frames": n, "fps": cap.fps, "scale_eq13": anim.scale, "rbf_c": anim.rbf.c, "head": head,
-                   "amplitude": amplitude,
+                   "amplitude": amplitude, "jaw": jaw,
                    "frames_target_folded": n_fold, "frames_gave_way": int(np.count_nonzero(drive.iterations)),
                    "frames_blended_to_rest": n_fallback, "plan_ms_per_frame": 1e3 * drive.seconds / max(n, 1),
                    "video_beside": str(video) if video is not None else None,

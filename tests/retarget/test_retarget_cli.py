@@ -484,3 +484,28 @@ def test_rest_depth_option(capture, tmp_path, capsys, monkeypatch):
 
         run_retarget(tmp_path / "no_such_capture", tmp_path / "out", rest_depth="deep")
     assert not (tmp_path / "out").exists()
+
+
+def test_jaw_option(capture, tmp_path, capsys):
+    """animate2d --jaw lips (default) drives the face contour by the lower lip, --jaw capture by the capture's
+    contour (tests/retarget/test_retarget_jawline.py: what each does to a turning head); the option reaches the
+    warp and is recorded; given twice, or a bad value, it is one line and no output."""
+    folder, _ = capture
+    meshes = {}
+    for name, extra in (("lips", []), ("capture", ["--jaw", "capture"])):
+        out = tmp_path / f"jaw_{name}"
+        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        assert json.loads((out / "summary.json").read_text())["jaw"] == name
+        with np.load(out / "cartoon_mesh.npz") as d:
+            meshes[name] = d["vertices"].astype(np.float64)
+    assert np.abs(meshes["lips"][:, :17] - meshes["capture"][:, :17]).max() > 1.0   # the contours differ
+    out = tmp_path / "bad"
+    _fails(["animate2d", str(folder), "--jaw", "chin", "--out", str(out)],
+           "--jaw: expected one of lips, capture, found 'chin'", capsys, out)
+    from facebasis.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["animate2d", str(folder), "--jaw", "lips", "--jaw", "capture", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "--jaw: expected once, found it given twice" in err and not out.exists()

@@ -385,6 +385,21 @@ RECIPES: tuple[Recipe, ...] = (
                  f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
                  f"--out reports/registration/round8_seed{s}" for s in (0, 1, 2, 3)),
            data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round9", "The rig bench with today's defaults (no pins; at commit 3177d9b: the pairs "
+           "schedule and eq. S3, the limit-cycle stop of the model fits, the detail field's amplitude map, eqs. D5-D6 of "
+           "geometry/fieldamplitude.py), both persons, seeds 0, 1, 2 and 3; baseline registration-rig-round9-uniform",
+           tuple(f"registration/round9_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig --seeds {s} --persons detail in-space --train 12 "
+                 f"--no-baseline --fit-modes 100 --after-model normal --regions 48 "
+                 f"--out reports/registration/round9_seed{s}" for s in (0, 1, 2, 3)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
+    Recipe("registration-rig-round9-uniform", "Baseline of registration-rig-round9: the detail field's deviation the same "
+           "everywhere (made at commit f524186, before eqs. D5-D6, whose field is --detail-amplitude-map uniform)",
+           tuple(f"registration/round9_uniform_seed{s}/{f}" for s in (0, 1, 2, 3) for f in ("rig.csv", "rig.md", "rig_scans.csv")),
+           tuple(f"OMP_NUM_THREADS=1 {PY} problems.bench_registration_rig {UNIFORM_AMPLITUDE} --seeds {s} --persons detail "
+                 f"in-space --train 12 --no-baseline --fit-modes 100 --after-model normal --regions 48 "
+                 f"--out reports/registration/round9_uniform_seed{s}" for s in (0, 1, 2, 3)),
+           data=("ict",), script="problems/bench_registration_rig.py"),
     Recipe("registration-rig-round8-template", "Baseline of registration-rig-round8: the same command with the detail "
            "field along the template's normals (--detail-field-normals template, the code before eq. D4), seeds 1 and 3 "
            "both persons, seed 2 the person with detail",

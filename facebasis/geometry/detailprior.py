@@ -388,12 +388,14 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
     if getattr(reg, "_detail_prior", None) is None:
         reg._detail_prior = DetailPrior(reg.V[part], icp.F, opts)
     D, choice, prior, w = reg.identity.deltas, None, reg._detail_prior, None
-    if opts.amplitude_map != "uniform":   # eq. D5: the field's functions scaled by w(x)
-        prior, w = weighted_prior(prior, plain, plain.vertices[part], surface, icp.vertex_normals, h, fo)
     m = person_normals(P[part], D[:, part], plain.coefficients, icp.vertex_normals) if (
         opts.field_normals == "person") else None                                       # eq. D4
+    weigh = lambda: weighted_prior(prior, plain, plain.vertices[part], surface, icp.vertex_normals, h, fo)  # noqa: E731
     if auto:  # eq. E1: s and the noise level from the evidence of the joint model at the modes-only fit
         choice, fo_e = _evidence_choice(plain, prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo, m)
+        if opts.amplitude_map != "uniform" and choice.sd > choice.noise and np.isfinite(choice.log_evidence):
+            prior, w = weigh()  # eq. D5 where the evidence finds detail above the noise, and its evidence again
+            choice, fo_e = _evidence_choice(plain, prior, P[part], D[:, part], surface, icp.vertex_normals, h, fo, m)
         if np.isfinite(choice.log_evidence):
             s, fo = choice.sd, fo_e
         else:  # the evidence could not be evaluated (a singular normal matrix): the amplitude rule and eq. D2,
@@ -404,7 +406,8 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
                                   reg.options.normal_stage, use=reg.skin)
         amplitude = AUTO_FIXED_PRIOR if isinstance(opts.amplitude, str) else opts.amplitude
         s = amplitude * offset_rms(out.offset, out.no_surface)
-    d6 = opts.amplitude_map == "field" and s > (choice.noise if choice is not None else plain.rms)  # detail > noise
+        prior, w = weigh() if opts.amplitude_map != "uniform" and s > plain.rms and w is None else (prior, w)
+    d6 = opts.amplitude_map == "field" and w is not None and s > (choice.noise if choice is not None else plain.rms)
     args, (first, again) = (P[part], D[:, part], surface, icp.vertex_normals, h, s), split_rounds(fo.iterations, d6)
     fit = fit_with_detail(plain, prior, *args, dataclasses.replace(fo, iterations=first),
                           start=plain if opts.noise_prior else None, field_normals=m)
@@ -421,10 +424,8 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
 
 def _evidence_choice(plain: ModelFit, prior: DetailPrior, base: np.ndarray, deltas: np.ndarray, surface, normals_of,
                      h: float, fo: ModelFitOptions, field_normals: np.ndarray | None = None):
-    """``(EvidenceChoice, the joint fit's options)``: ``s`` and the noise level ``sigma_n`` maximising eq. E1 of
-    :mod:`.detailevidence` at the modes-only fit ``plain`` (the field at zero), paired as the joint fit with options
-    ``fo`` pairs; the joint fit's ``mu`` is eq. D2 at ``sigma_n`` over those pairs (within the bounds of
-    :func:`noise_prior`)."""
+    """``(EvidenceChoice, the joint fit's options)``: ``s``, ``sigma_n`` maximising eq. E1 (:mod:`.detailevidence`) at
+    ``plain`` (field 0), paired as the joint fit's ``fo``; its ``mu``: eq. D2 at ``sigma_n`` (:func:`noise_prior`'s bounds)."""
     from .detailevidence import choose_by_evidence, normal_equations
 
     basis = ModesAndField(deltas, prior.phi, prior.normals if field_normals is None else field_normals)
@@ -436,9 +437,8 @@ def _evidence_choice(plain: ModelFit, prior: DetailPrior, base: np.ndarray, delt
 
 
 def detail_report(fit: ModelFit) -> dict:
-    """The detail field's part of a registration's report: ``{"detail_field": {...}}`` with its deviation ``s``
-    and, when the evidence chose it (:mod:`.detailevidence`), the noise level chosen with it; ``{}`` without a
-    field."""
+    """The detail field's part of a registration's report: ``{"detail_field": {...}}`` with its deviation ``s`` and,
+    when the evidence chose it (:mod:`.detailevidence`), the noise level chosen with it; ``{}`` without a field."""
     if not fit.detail_sd > 0:
         return {}
     return {"detail_field": {"sd_template_units": float(fit.detail_sd),

@@ -24,8 +24,11 @@ their mean square, ``k`` the field's own squared-exponential kernel of length ``
 estimate of the local residual variance, shrunk to the mean with a pseudo-count ``c`` = :data:`PSEUDO`
 where few pairs are near: the sockets), the mean over the part's vertices. The field is then the
 non-stationary process of covariance ``s^2 w(x) w(y) k(x, y)`` (a valid kernel for any ``w``), and the
-evidence (:mod:`.detailevidence`, eq. E1) still chooses ``s`` and the noise level. A scan within the space
-leaves noise alone: ``w`` ~ 1, and the evidence's ``s`` is near its lower bound anyway.
+evidence (:mod:`.detailevidence`, eq. E1) still chooses ``s`` and the noise level. Only where the evidence of the
+uniform field finds detail above the noise (``s > sigma_n``; with a given amplitude: above the modes-only fit's
+residual) is ``w`` used: on a scan within the space the residual is noise, and eq. D5 on noise alone (weights 0.8-1.3,
+up to 2 with 1 % outliers: squared residuals are not robust) moved a 0.6 mm-noise in-space neutral by 20 % RMS
+(review9); such a scan gets the uniform field, exactly.
 
 **Re-estimated from the fitted field** (eq. D6, ``amplitude_map="field"``, the default). The modes-only fit's
 residual is a blurred picture of the detail (the modes took part of it), so after the joint fit ``w`` is estimated
@@ -66,7 +69,8 @@ the same CPU as the uniform field's rounds) and samples 1500 pairs: seed 3 ``det
 (4497 vertices, a noise-free scan, bumps on the front) RMS uniform -> eq. D5 -> eq. D6: 0.0058 -> 0.0018 -> 0.0017 cm
 with 300 functions, 0.0149 -> 0.0117 -> 0.0044 with 150, but 0.0294 -> 0.0332 -> 0.0347 with 60 (a basis too short
 to carry the detail leaves it to the modes either way). Cost: two (n, 1500) kernel passes and one pairing round,
-~0.5 s CPU per ICT neutral; the whole neutral 9.1-9.3 s CPU at load 13 with the field's basis (7.8 s uniform).
+~0.5 s CPU per ICT neutral; the whole neutral 7.5-8.1 s CPU (detail persons, seeds 0-3 of the rig bench, load 5-7,
+``reports/registration/round9_seed*``; the 9.1-9.3 s measured before at load 13 was the 20 + 8 rounds version).
 """
 
 from __future__ import annotations

@@ -23,7 +23,8 @@ linearised energy inside the bounds. The non-rigid stage (:mod:`.nricp`) then st
 takes only what the space cannot express: correspondence follows the model's convention instead of sliding.
 
 **When the loop stops.** When a round moves no vertex by ``tolerance h`` (at the final prior), or when it
-returns to a state of up to :data:`CYCLE` rounds before: the closest points are discrete, so near the
+returns to a state of up to :data:`CYCLE` rounds before (within ``tolerance h`` and 1 % of the round's step, so an
+oscillation that still shrinks goes on): the closest points are discrete, so near the
 minimum a vertex pair that enters and leaves the kept set (or a bound that becomes active and inactive)
 can make the iteration cycle for ever between two to four states; the state of the cycle with the smallest
 residual RMS is returned. Measured on the ICT mouth scans (``problems.bench_mouth_basin``, seed 1 in-space
@@ -400,11 +401,11 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         RN = pose.scale * (N @ pose.rotation)
         Jc = basis.normal_jacobian(idx, RN)
         w = 1.0 / np.sqrt(kept)
-        mu = options.prior if options.prior_start is None else options.prior_start * (
-            options.prior / options.prior_start) ** min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
+        t = 1.0 if options.prior_start is None else min(1.0, (it - 1) / max(1.0, options.iterations / 2 - 1))
+        final = t >= 1.0  # the graduated prior has reached its final value
+        mu = options.prior if final else options.prior_start * (options.prior / options.prior_start) ** t
         lam = np.sqrt(mu) * h / sigma
-        final = options.prior_start is None or mu == options.prior
-        seen = (seen + [(X, c, pose, rms)])[-CYCLE:] if final else []
+        seen = (seen + [(X, c, pose, rms, kept)])[-CYCLE:] if final else []
         H, g = normal_equations(w * Jp, w * Jc, w * r0, lam, c)
         lb = np.concatenate([np.full(npose, -np.inf), lo - c])
         ub = np.concatenate([np.full(npose, np.inf), hi - c])
@@ -420,8 +421,11 @@ def fit_shape_model(base: np.ndarray, deltas: np.ndarray, surface, normals_of, h
         X = X_new
         if step < options.tolerance * h and final:
             break
-        back_to = [k for k in range(2, len(seen) + 1) if np.abs(X - seen[-k][0]).max() < options.tolerance * h]
-        if back_to:  # a limit cycle (module docstring): its state with the smallest residual
-            X, c, pose, rms = min(seen[-back_to[0]:], key=lambda state: state[3])
+        # a limit cycle (module docstring): back where it was k rounds ago, exactly (within 1 % of this round's step:
+        # a shrinking oscillation is not a cycle); its state with the smallest residual
+        back_to = [k for k in range(2, len(seen) + 1)
+                   if np.abs(X - seen[-k][0]).max() < min(options.tolerance * h, 0.01 * step)]
+        if back_to:
+            X, c, pose, rms, kept = min(seen[-back_to[0]:], key=lambda state: state[3])
             break
     return ModelFit(X, c, pose, rms, kept, it)

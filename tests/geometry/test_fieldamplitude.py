@@ -83,10 +83,12 @@ def test_a_field_where_the_modes_miss_slides_the_points_less():
 
 
 def test_a_person_within_the_space_is_fitted_as_before():
+    """Where the evidence finds no detail above the scan's noise, neither eq. D5 nor D6 runs: the fit is the uniform
+    field's (eq. D5 on pure noise had weights 0.8-1.3 and moved a noisy in-space neutral by 20 %, review9)."""
     T, F, D, c, _, _, _ = person_parts()
     person = T + np.tensordot(c, D, 1)
     out = {how: _register(person, T, F, D, how) for how in ("uniform", "field")}
-    assert out["field"][2] < 1.1 * out["uniform"][2] + 1e-4
+    np.testing.assert_allclose(out["field"], out["uniform"], rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("value", ["local", None, 1])

@@ -280,3 +280,30 @@ def test_model_fit_stops_at_a_limit_cycle_and_returns_one_of_its_states():
     fit = fit_shape_model(base, bend, _JumpingPlanes(), normals, 0.1, ModelFitOptions(scale=False, iterations=40))
     assert fit.iterations <= 2 + CYCLE < 40
     assert np.ptp(fit.vertices[:, 2]) < 1e-6 and min(abs(fit.vertices[0, 2] - 1.0), abs(fit.vertices[0, 2] - 0.3)) < 1e-6
+
+
+class _FlatOrWavy:
+    """A mesh below ``z = 0.5`` (mean) pairs with the plane ``z = 1``, one above with the wavy sheet
+    ``z = 0.3 + 0.2 sin(3 pi y)``, which no pose and bend reach: the loop cycles between the flat mesh at 1
+    (residual RMS about 0.72 against the sheet) and the sheet's best fit near 0.3 (about 0.7 against the plane)."""
+
+    def nearest_planes(self, P, plane=True, max_distance=np.inf):
+        U = P.copy()
+        U[:, 2] = 1.0 if P[:, 2].mean() < 0.5 else 0.3 + 0.2 * np.sin(3 * np.pi * P[:, 1])
+        return U, np.tile([0.0, 0.0, 1.0], (len(P), 1)), np.abs(P[:, 2] - U[:, 2]), np.zeros(len(P), bool)
+
+
+@pytest.mark.parametrize("z0", [0.0, 0.6])
+def test_model_fit_keeps_the_cycle_state_with_the_smaller_residual(z0):
+    """Started on either side (so that the last state, or the one before it, is the worse one), the fit returns the
+    cycle's state with the smaller residual: the fit of the wavy sheet near z = 0.3, not the plane at 1."""
+    from facebasis.geometry.shapemodel import ModelFitOptions, fit_shape_model
+
+    x, y = np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9))
+    base = np.column_stack([x.ravel(), y.ravel(), np.full(81, z0)])
+    bend = np.zeros((1, 81, 3))
+    bend[0, :, 2] = base[:, 0] ** 2
+    normals = lambda X: np.tile([0.0, 0.0, 1.0], (len(X), 1))  # noqa: E731
+    fit = fit_shape_model(base, bend, _FlatOrWavy(), normals, 0.1, ModelFitOptions(scale=False, iterations=40))
+    assert fit.iterations < 40
+    assert abs(fit.vertices[:, 2].mean() - 0.3) < 0.1 and fit.rms < 0.71

@@ -94,6 +94,19 @@ def _camera_args(p) -> None:
                         "kept if the check frames fit better than with the flat offsets; 'none': flat (the former model)")
 
 
+def _cartoon_options(p) -> None:
+    """animate2d's ``--amplitude`` and ``--jaw``: how the cartoon's features and contour follow the capture."""
+    p.add_argument("--amplitude", default="feature", metavar="feature|uniform",
+                   help="how far each feature moves (default feature: each eye and the mouth in the "
+                        "cartoon's own proportions, the brows with their eyes, e.g. a cartoon eye twice as tall "
+                        "closes by twice as much; "
+                        "uniform: one scale for the whole face, the paper's eq. 12-13)")
+    p.add_argument("--jaw", default=None, action=Once, metavar="lips|capture",
+                   help="the face contour on a head held still (default lips: it follows the lower lip, so the "
+                        "chin drops as the mouth opens and head turns do not swing the outline; capture: the "
+                        "captured contour, turns included)")
+
+
 def register(subparsers) -> None:
     """Add ``animate2d``, ``animate3d`` and ``retarget`` to an argparse sub-parser collection."""
     p = subparsers.add_parser(
@@ -108,15 +121,7 @@ def register(subparsers) -> None:
     p.add_argument("--landmarks", default=None, metavar="CARTOON.pts",
                    help="the cartoon's landmarks, .pts or .json, as many as the capture has (needed with --image)")
     _head_options(p, "cartoon")
-    p.add_argument("--amplitude", default="feature", metavar="feature|uniform",
-                   help="how far each feature moves (default feature: each eye and the mouth in the "
-                        "cartoon's own proportions, the brows with their eyes, e.g. a cartoon eye twice as tall "
-                        "closes by twice as much; "
-                        "uniform: one scale for the whole face, the paper's eq. 12-13)")
-    p.add_argument("--jaw", default=None, action=Once, metavar="lips|capture",
-                   help="the face contour on a head held still (default lips: it follows the lower lip, so the "
-                        "chin drops as the mouth opens and head turns do not swing the outline; capture: the "
-                        "captured contour, turns included)")
+    _cartoon_options(p)
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=cmd_animate2d, outputs=Outputs(writes=_OUT, reads=("capture", "image", "landmarks"),
                                                       derived=_capture_video))

@@ -78,7 +78,7 @@ def replay_rows(cap, clip: str, image_name: str, image, landmarks, readers: dict
     anim = CartoonAnimator(image, landmarks, cap.landmarks[0], cap.vertices[0], cap.faces)
     drive = anim.drive(cap.vertices[frames], cap.landmarks[frames])
     W = drive.still[:, :68]
-    own = CartoonAnimator(image, landmarks, landmarks, landmarks, Delaunay(landmarks).simplices)
+    own = CartoonAnimator(image, landmarks, landmarks, landmarks, Delaunay(landmarks).simplices, jaw="capture")
     together = own.drive(W, W)
     n = len(frames)
     rows = []

@@ -319,6 +319,10 @@ class CartoonAnimator:
 
             maps = feature_maps(self.capture_landmarks, self.rest[:68], self.scale)
             target = self.rest + maps.apply(V - self.capture_rest)
+            if self.jaw == "lips":  # the chin with the cartoon's own lower lip (its mouth's map), not the capture's
+                from .jawline import jaw_from_lips
+
+                target = jaw_from_lips(target, self.rest)
         else:
             target = self.mesh(V)
         if self._smooth is not None:                 # the interior follows the landmarks smoothly

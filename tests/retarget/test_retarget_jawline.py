@@ -80,3 +80,21 @@ def test_the_readback_ramps_keep_their_own_contour():
     for feature in FEATURES:
         P = ramp(rest, feature, 5)
         assert np.allclose(jaw_from_lips(P, rest), P, atol=1e-9), feature
+
+
+def test_the_chin_follows_the_cartoons_own_lower_lip():
+    """A cartoon whose mouth is 1.6 times as wide as the capture's opens it by its own mouth's map (amplitude
+    "feature"): the chin moves with that lower lip, not with the capture's (review9: 0.68 of the lip before)."""
+    rest = _rest()
+    cartoon = rest.copy()
+    m = cartoon[48:68].mean(0)
+    cartoon[48:68] = m + 1.6 * (cartoon[48:68] - m)
+    img = np.full((128, 128, 3), 180, np.uint8)
+    anim = CartoonAnimator(img, cartoon, rest, rest, Delaunay(rest).simplices)
+    P = _opening(rest, np.linspace(0.0, 2.0, T))
+    d = anim.drive(P, P)
+    assert not d.folded_target.any()
+    still = d.still
+    lip = still[:, 56:59].mean(1) - anim.rest[56:59].mean(0)
+    assert lip[-1, 1] > 2.5                                          # the wider mouth opens further than the capture
+    np.testing.assert_allclose(still[:, 6:11] - anim.rest[6:11], np.repeat(lip[:, None], 5, 1), atol=1e-6)

@@ -20,6 +20,30 @@ def parser_refuses(main, argv, capsys, *needles):
     assert e.value.code == 2 and all(n in err for n in needles), err
 
 
+def check_detail_choice_flag(main, tmp_path, capsys, monkeypatch, flag: str, field: str, bad: str, values: tuple):
+    """A ``register`` choice flag of the detail prior (``flag``, :class:`DetailPriorOptions`'s ``field``): a bad value
+    and a repeat refused while parsing, refused without the detail prior (one line, no output), and each of ``values``
+    (the first the default) reaching the registration's options, the CLI's default being the library's."""
+    import facebasis.geometry.registerfiles as rf
+    from facebasis.geometry.detailprior import DetailPriorOptions
+
+    out = tmp_path / "o"
+    base = ["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out)]
+    parser_refuses(main, base + [flag, bad], capsys, flag, f"invalid choice: '{bad}'")
+    parser_refuses(main, base + [flag, values[0], flag, values[-1]], capsys, flag)
+    assert main(base + [flag, values[-1], "--detail-prior", "off", "--identity-prior", "fixed"]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} {values[-1]}: expected together with --detail-prior on" in err and err.count("\n") == 1
+    assert not out.exists()
+    seen = {}
+    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
+    for given, how in [([], values[0])] + [([flag, v], v) for v in values[1:]]:
+        seen.clear()
+        assert main(base + given) == 0
+        assert seen["opts"].detail == DetailPriorOptions(**{field: how})
+    assert getattr(DetailPriorOptions(), field) == values[0]  # the CLI's default is the library's
+
+
 def grid_sheet(nx=6, ny=5, z=0.0, size=1.0):
     """A flat triangulated sheet in the plane z, (V, F)."""
     xs, ys = np.meshgrid(np.linspace(0, size, nx), np.linspace(0, size * 0.8, ny), indexing="xy")

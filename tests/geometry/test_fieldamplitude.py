@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import parser_refuses
+from conftest import check_detail_choice_flag
 from test_detailprior import person_parts
 
 from facebasis.cli import main
@@ -99,23 +99,5 @@ def test_bad_amplitude_map_is_refused(value):
 
 def test_cli_detail_amplitude_map_bad_value_repeat_without_the_prior_and_reaching_the_registration(tmp_path, capsys,
                                                                                                    monkeypatch):
-    import facebasis.geometry.registerfiles as rf
-
-    out = tmp_path / "o"
-    base = ["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out)]
-    parser_refuses(main, base + ["--detail-amplitude-map", "local"], capsys, "--detail-amplitude-map",
-                   "invalid choice: 'local'")
-    parser_refuses(main, base + ["--detail-amplitude-map", "field", "--detail-amplitude-map", "uniform"], capsys,
-                   "--detail-amplitude-map")
-    assert main(base + ["--detail-amplitude-map", "uniform", "--detail-prior", "off", "--identity-prior", "fixed"]) == 2
-    err = capsys.readouterr().err
-    assert "--detail-amplitude-map uniform: expected together with --detail-prior on" in err and err.count("\n") == 1
-    assert not out.exists()
-    seen = {}
-    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
-    for given, how in (([], "field"), (["--detail-amplitude-map", "residual"], "residual"),
-                       (["--detail-amplitude-map", "uniform"], "uniform")):
-        seen.clear()
-        assert main(base + given) == 0
-        assert seen["opts"].detail == DetailPriorOptions(amplitude_map=how)
-    assert DetailPriorOptions().amplitude_map == "field"  # the CLI's default is the library's
+    check_detail_choice_flag(main, tmp_path, capsys, monkeypatch, "--detail-amplitude-map", "amplitude_map", "local",
+                             ("field", "residual", "uniform"))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import parser_refuses
+from conftest import check_detail_choice_flag
 from test_detailprior import person_parts
 
 from facebasis.cli import main
@@ -64,22 +64,5 @@ def test_bad_field_normals_are_refused(value):
 
 def test_cli_detail_field_normals_bad_value_repeat_without_the_prior_and_reaching_the_registration(tmp_path, capsys,
                                                                                                    monkeypatch):
-    import facebasis.geometry.registerfiles as rf
-
-    out = tmp_path / "o"
-    base = ["register", str(tmp_path / "s.obj"), "--template", str(tmp_path / "t.obj"), "--out", str(out)]
-    parser_refuses(main, base + ["--detail-field-normals", "scan"], capsys, "--detail-field-normals",
-                   "invalid choice: 'scan'")
-    parser_refuses(main, base + ["--detail-field-normals", "person", "--detail-field-normals", "template"], capsys,
-                   "--detail-field-normals")
-    assert main(base + ["--detail-field-normals", "template", "--detail-prior", "off", "--identity-prior", "fixed"]) == 2
-    err = capsys.readouterr().err
-    assert "--detail-field-normals template: expected together with --detail-prior on" in err and err.count("\n") == 1
-    assert not out.exists()
-    seen = {}
-    monkeypatch.setattr(rf, "register_files", lambda *a, **k: seen.setdefault("opts", a[5]) and {"scans": []})
-    for given, how in (([], "person"), (["--detail-field-normals", "template"], "template")):
-        seen.clear()
-        assert main(base + given) == 0
-        assert seen["opts"].detail == DetailPriorOptions(field_normals=how)
-    assert DetailPriorOptions().field_normals == "person"  # the CLI's default is the library's
+    check_detail_choice_flag(main, tmp_path, capsys, monkeypatch, "--detail-field-normals", "field_normals", "scan",
+                             ("person", "template"))

@@ -26,21 +26,14 @@ def cmd_register(args) -> int:
     if args.identity_prior == "noise" and args.detail_prior == "off":   # the prior applies to the joint fit only
         raise InputError("--identity-prior noise: expected together with --detail-prior on (the noise-level prior "
                          "continues the fit of the modes and the detail field), found --detail-prior off")
-    if args.detail_modes is not None and args.detail_prior == "off":
-        raise InputError(f"--detail-modes {args.detail_modes}: expected together with --detail-prior on (the detail "
-                         "field's basis functions), found --detail-prior off")
-    if args.detail_basis is not None and args.detail_prior == "off":
-        raise InputError(f"--detail-basis {args.detail_basis}: expected together with --detail-prior on (the detail "
-                         "field's basis), found --detail-prior off")
-    if args.detail_amplitude is not None and args.detail_prior == "off":
-        raise InputError(f"--detail-amplitude {args.detail_amplitude}: expected together with --detail-prior on (the "
-                         "detail field's deviation), found --detail-prior off")
-    if args.detail_field_normals is not None and args.detail_prior == "off":
-        raise InputError(f"--detail-field-normals {args.detail_field_normals}: expected together with --detail-prior on "
-                         "(the detail field's directions), found --detail-prior off")
-    if args.detail_amplitude_map is not None and args.detail_prior == "off":
-        raise InputError(f"--detail-amplitude-map {args.detail_amplitude_map}: expected together with --detail-prior on "
-                         "(the detail field's deviation over the skin), found --detail-prior off")
+    for dest, what in (("detail_modes", "the detail field's basis functions"), ("detail_basis", "the detail field's basis"),
+                       ("detail_amplitude", "the detail field's deviation"),
+                       ("detail_field_normals", "the detail field's directions"),
+                       ("detail_amplitude_map", "the detail field's deviation over the skin")):
+        value = getattr(args, dest)
+        if value is not None and args.detail_prior == "off":  # options of the detail prior: never dropped silently
+            raise InputError(f"--{dest.replace('_', '-')} {value}: expected together with --detail-prior on ({what}), "
+                             "found --detail-prior off")
     if lm == ["auto"]:
         from ..capture.detect import available_detector, get_detector
 

@@ -190,19 +190,26 @@ def test_bad_head_values(capture, tmp_path, capsys, value):
                f"--head: expected one of still, follow, found {value!r}", capsys, out)
 
 
+def _animate2d_meshes(folder, tmp_path, capsys, key: str, values) -> dict:
+    """animate2d with ``--key`` at each of ``values`` (the first the default, not given): each run succeeds and its
+    summary records the value; the cartoon meshes (T, N, 2) by value."""
+    meshes = {}
+    for i, name in enumerate(values):
+        out = tmp_path / f"{key}_{name}"
+        extra = [f"--{key}", name] if i else []
+        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        assert json.loads((out / "summary.json").read_text())[key] == name
+        with np.load(out / "cartoon_mesh.npz") as d:
+            meshes[name] = d["vertices"].astype(np.float64)
+    return meshes
+
+
 def test_amplitude_option(capture, tmp_path, capsys):
     """animate2d --amplitude feature (default) and uniform (the paper's one scale) move the eyes,
     brows and mouth differently (the built-in cartoon's proportions are not the capture's: its eyes
     are 0.9x as tall, relative to the face, and the brows follow the eyes' centres)."""
-    folder, _ = capture
-    meshes = {}
-    for name, extra in (("feature", []), ("uniform", ["--amplitude", "uniform"])):
-        out = tmp_path / f"amp_{name}"
-        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
-        assert code == 0, err
-        assert json.loads((out / "summary.json").read_text())["amplitude"] == name
-        with np.load(out / "cartoon_mesh.npz") as d:
-            meshes[name] = d["vertices"].astype(np.float64)
+    meshes = _animate2d_meshes(capture[0], tmp_path, capsys, "amplitude", ("feature", "uniform"))
     diff = np.abs(meshes["feature"] - meshes["uniform"]).max(axis=(0, 2))
     assert diff[17:27].max() > 1.0 and diff[36:48].max() > 1.0 and diff[48:68].max() > 1.0
 
@@ -378,42 +385,54 @@ def test_the_principal_point_is_not_named_as_focal():
     assert "centre" not in FLAGS and FLAGS["focal"] == "--focal" and FLAGS["noise_model"] == "--noise-model"
 
 
-def test_point_noise_option(capture, tmp_path, capsys, monkeypatch):
-    """--point-noise per-point|shared reaches the solver (default: the library's, per-point), the
-    landmarks' weights are in the summary (none with shared); bad or repeated values are one line with
-    nothing written."""
+def _check_retarget_option(folder, tmp_path, capsys, monkeypatch, key: str, cases, bad: str, library_message: str):
+    """A ``retarget`` choice option (``--key`` with dashes, :class:`RigRetargeter`'s keyword ``key``): each of ``cases``
+    (extra argv, the value expected; the second and third given together are a repeat) reaches the solver and the
+    summary; a bad value and a repeat are refused while parsing, and the library refuses the bad value with ``library_message``, nothing written. Returns the cases'
+    (value, summary, stdout)."""
+    from facebasis.retarget.pipeline import run_retarget
     from facebasis.retarget.rigdrive import RigRetargeter
 
-    folder, _ = capture
-    seen = []
+    flag = "--" + key.replace("_", "-")
+    seen, runs = [], []
     original = RigRetargeter.__init__
 
     def spy(self, *a, **kw):
-        seen.append(kw.get("point_noise"))
+        seen.append(kw.get(key))
         original(self, *a, **kw)
 
     monkeypatch.setattr(RigRetargeter, "__init__", spy)
-    for extra, want in (([], "per-point"), (["--point-noise", "shared"], "shared"), (["--point-noise", "per-point"], "per-point")):
-        out = tmp_path / f"pn{len(seen)}"
+    for extra, want in cases:
+        out = tmp_path / f"{key}{len(seen)}"
         code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
         assert code == 0, stdout
         assert seen[-1] == want
         summary = json.loads((out / "summary.json").read_text())
-        assert summary["point_noise"] == want
+        assert summary[key] == want
+        runs.append((want, summary, stdout))
+    for argv, msg in (([flag, bad], f"invalid choice: '{bad}'"), (cases[1][0] + cases[2][0], flag)):
+        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(InputError, match=library_message):
+        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", **{key: bad})
+    assert not (tmp_path / "out").exists()
+    return runs
+
+
+def test_point_noise_option(capture, tmp_path, capsys, monkeypatch):
+    """--point-noise per-point|shared reaches the solver (default: the library's, per-point), the
+    landmarks' weights are in the summary (none with shared); bad or repeated values are one line with
+    nothing written."""
+    folder, _ = capture
+    cases = (([], "per-point"), (["--point-noise", "shared"], "shared"), (["--point-noise", "per-point"], "per-point"))
+    for want, summary, stdout in _check_retarget_option(
+            folder, tmp_path, capsys, monkeypatch, "point_noise", cases, "pointwise",
+            r"^point_noise: expected one of per-point, shared, found 'pointwise'$"):
         w = summary.get("landmark_weights")
         assert (w is None) == (want == "shared")
         if w is not None:
             assert len(w) == summary_landmarks(folder) and min(w) > 0 and max(w) == 1.0
             assert "landmark noise per point:" in stdout
-    for argv, msg in ((["--point-noise", "pointwise"], "invalid choice: 'pointwise'"),
-                      (["--point-noise", "shared", "--point-noise", "per-point"], "--point-noise")):
-        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
-        assert not (tmp_path / "bad").exists()
-    with pytest.raises(InputError, match=r"^point_noise: expected one of per-point, shared, found 'pointwise'$"):
-        from facebasis.retarget.pipeline import run_retarget
-
-        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", point_noise="pointwise")
-    assert not (tmp_path / "out").exists()
 
 
 def summary_landmarks(folder) -> int:
@@ -458,32 +477,10 @@ def test_gaze_option(capture, tmp_path, capsys, monkeypatch):
 def test_rest_depth_option(capture, tmp_path, capsys, monkeypatch):
     """--rest-depth tangent|none reaches the solver (default: the library's, tangent) and the summary; bad or
     repeated values are one line with nothing written."""
-    from facebasis.retarget.rigdrive import RigRetargeter
-
     folder, _ = capture
-    seen = []
-    original = RigRetargeter.__init__
-
-    def spy(self, *a, **kw):
-        seen.append(kw.get("rest_depth"))
-        original(self, *a, **kw)
-
-    monkeypatch.setattr(RigRetargeter, "__init__", spy)
-    for extra, want in (([], "tangent"), (["--rest-depth", "none"], "none"), (["--rest-depth", "tangent"], "tangent")):
-        out = tmp_path / f"rd{len(seen)}"
-        code, stdout, _ = run(["retarget", str(folder), "--out", str(out), "--no-preview", *extra], capsys)
-        assert code == 0, stdout
-        assert seen[-1] == want
-        assert json.loads((out / "summary.json").read_text())["rest_depth"] == want
-    for argv, msg in ((["--rest-depth", "deep"], "invalid choice: 'deep'"),
-                      (["--rest-depth", "none", "--rest-depth", "tangent"], "--rest-depth")):
-        parser_refuses(_main(), ["retarget", str(folder), "--out", str(tmp_path / "bad"), *argv], capsys, msg)
-        assert not (tmp_path / "bad").exists()
-    with pytest.raises(InputError, match=r"^rest_depth: expected one of tangent, none, found 'deep'$"):
-        from facebasis.retarget.pipeline import run_retarget
-
-        run_retarget(tmp_path / "no_such_capture", tmp_path / "out", rest_depth="deep")
-    assert not (tmp_path / "out").exists()
+    _check_retarget_option(folder, tmp_path, capsys, monkeypatch, "rest_depth",
+                           (([], "tangent"), (["--rest-depth", "none"], "none"), (["--rest-depth", "tangent"], "tangent")),
+                           "deep", r"^rest_depth: expected one of tangent, none, found 'deep'$")
 
 
 def test_jaw_option(capture, tmp_path, capsys):
@@ -491,14 +488,7 @@ def test_jaw_option(capture, tmp_path, capsys):
     contour (tests/retarget/test_retarget_jawline.py: what each does to a turning head); the option reaches the
     warp and is recorded; given twice, or a bad value, it is one line and no output."""
     folder, _ = capture
-    meshes = {}
-    for name, extra in (("lips", []), ("capture", ["--jaw", "capture"])):
-        out = tmp_path / f"jaw_{name}"
-        code, _, err = run(["animate2d", str(folder), *extra, "--out", str(out)], capsys)
-        assert code == 0, err
-        assert json.loads((out / "summary.json").read_text())["jaw"] == name
-        with np.load(out / "cartoon_mesh.npz") as d:
-            meshes[name] = d["vertices"].astype(np.float64)
+    meshes = _animate2d_meshes(folder, tmp_path, capsys, "jaw", ("lips", "capture"))
     assert np.abs(meshes["lips"][:, :17] - meshes["capture"][:, :17]).max() > 1.0   # the contours differ
     out = tmp_path / "bad"
     _fails(["animate2d", str(folder), "--jaw", "chin", "--out", str(out)],

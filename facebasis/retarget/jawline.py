@@ -26,7 +26,7 @@ a taper from the chin to the ears (``w_i = 1 - |i - 8| / 8``) pulls the cheeks d
 reading of the turned cameraman's opening r 0.61 -> 0.21, the painted astronaut 0.98 -> 0.95, MediaPipe
 0.96 -> 0.91); half of the lip's motion at 5 and 11 still lowered it (0.61 -> 0.48, astronaut gain 1.02 -> 0.84).
 The lower lip's own motion is unchanged. With each feature moved by its own map (``amplitude`` "feature",
-:mod:`.featurescale`) the chin is placed again after the maps, with the cartoon's own lower lip
+:mod:`.featurescale`) the chin follows the cartoon's own lower lip, after the maps
 (:meth:`.warp2d.CartoonAnimator.drive`): a cartoon mouth wider than the capture's opens further, and a chin that
 followed the capture's lip moved only 0.68 of it (review9: the lip-chin gap of the built-in cartoon with a 1.6 times
 wider mouth shrank from 38.4 to 4.3 px on cap13).

@@ -280,12 +280,12 @@ class CartoonAnimator:
         fold-free solve per frame where it is needed).
 
         1. the head's similarity per frame (:func:`.headmotion.fit_head_motion`, stable landmarks
-           against the first frame) is taken out of the captured vertices; with ``jaw`` "lips" the face
-           contour then follows the lower lip (:func:`.jawline.jaw_from_lips`);
+           against the first frame) is taken out of the captured vertices;
         2. eq. 12 on what is left: ``rest + s (v'_t - v_0)``, with ``amplitude`` "feature" each eye
            and the mouth by its own 2x2 map (a brow with its eye) instead of ``s``
            (:mod:`.featurescale`, from the capture's frame 0, the frame the correspondence is
-           trained on, to the rest);
+           trained on, to the rest); with ``jaw`` "lips" the face contour then follows the cartoon's lower
+           lip (:func:`.jawline.jaw_from_lips`);
         3. with ``fold_free``: lip and eyelid contacts close (:func:`close_contacts`), then
            :class:`.foldfree.FoldFreeMap` makes every triangle keep its orientation;
         4. with head "follow", the similarity is carried over to the cartoon (same rotation and
@@ -310,21 +310,19 @@ class CartoonAnimator:
                              f"found {lm.shape}")
         motion = fit_head_motion(lm, self.capture_landmarks)
         V = motion.remove(V)
-        if self.jaw == "lips" and len(self.capture_landmarks) == 68:    # the contour: jaw opening, not head turns
-            from .jawline import jaw_from_lips
-
-            V = jaw_from_lips(V, self.capture_rest)
         if self.amplitude == "feature":                       # eq. 12 per feature
             from .featurescale import feature_maps
 
             maps = feature_maps(self.capture_landmarks, self.rest[:68], self.scale)
             target = self.rest + maps.apply(V - self.capture_rest)
-            if self.jaw == "lips":  # the chin with the cartoon's own lower lip (its mouth's map), not the capture's
-                from .jawline import jaw_from_lips
-
-                target = jaw_from_lips(target, self.rest)
         else:
             target = self.mesh(V)
+        if self.jaw == "lips" and len(self.capture_landmarks) == 68:
+            from .jawline import jaw_from_lips
+
+            # the contour: the jaw opening with the cartoon's own lower lip (its mouth's map with amplitude
+            # "feature"), not the head's turns
+            target = jaw_from_lips(target, self.rest)
         if self._smooth is not None:                 # the interior follows the landmarks smoothly
             L = len(self.capture_landmarks)
             target[:, L:] = self.rest[L:] + np.einsum("vl,tlc->tvc", self._smooth, target[:, :L] - self.rest[:L])

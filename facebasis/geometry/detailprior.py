@@ -98,6 +98,7 @@ from .laplacian import cotangent_laplacian, lumped_mass
 from .fieldamplitude import AMPLITUDE_MAPS, refit_on_field, split_rounds, weighted_prior
 from .fieldnormals import fit_along_person_normals, person_normals
 from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
+from .unseen import se_kernel
 
 
 #: the noise-level prior (eq. D2) is never weaker than this fraction of the fixed one (a noise-free scan
@@ -272,7 +273,6 @@ def _kernel_basis(V: np.ndarray, F: np.ndarray, ell: float, modes: int, chunk: i
     ones above 1e-10 of the largest), those ``lambda_k`` and unit scales. Inducing points: the first vertex
     of each occupied cell of ``INDUCING_CELL l`` (deterministic); ``k(x, z)`` in blocks of ``chunk`` vertices."""
     from scipy.linalg import eigh
-    from scipy.spatial.distance import cdist
 
     cell = INDUCING_CELL * ell
     while True:                          # at most MAX_INDUCING points: a longer cell for a short length
@@ -283,11 +283,11 @@ def _kernel_basis(V: np.ndarray, F: np.ndarray, ell: float, modes: int, chunk: i
         cell *= np.sqrt(len(Z) / MAX_INDUCING)
     m = len(Z)
     J = int(min(modes, m))
-    lam, U = eigh(np.exp(-cdist(Z, Z, "sqeuclidean") / (2.0 * ell ** 2)), subset_by_index=[m - J, m - 1])
+    lam, U = eigh(se_kernel(Z, Z, ell), subset_by_index=[m - J, m - 1])
     lam, U = lam[::-1], U[:, ::-1]
     keep = lam > 1e-10 * lam[0]
     W = U[:, keep] / np.sqrt(lam[keep])
-    B = np.concatenate([np.exp(-cdist(V[i:i + chunk], Z, "sqeuclidean") / (2.0 * ell ** 2)) @ W
+    B = np.concatenate([se_kernel(V[i:i + chunk], Z, ell) @ W
                         for i in range(0, len(V), chunk)])  # a loop over blocks of vertices (memory), not vertices
     return B.T, lam[keep], np.ones(int(keep.sum()))
 

@@ -78,9 +78,8 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.spatial.distance import cdist
-
 from .shapemodel import ModelFit, ModelFitOptions, _pairs
+from .unseen import se_kernel
 
 #: the pseudo-count ``c`` of eq. D5: the local variance falls back to the mean where the kernel weights of the
 #: pairs sum to less than about this (a vertex with no pair within a few lengths: a socket's inside)
@@ -122,7 +121,7 @@ def residual_weights(X: np.ndarray, idx: np.ndarray, r: np.ndarray, length: floa
     P, mean = X[idx], float(r2.mean())
     num, den = np.empty(len(X)), np.empty(len(X))
     for i in range(0, len(X), chunk):
-        K = np.exp(-cdist(X[i:i + chunk], P, "sqeuclidean") / (2.0 * length ** 2))
+        K = se_kernel(X[i:i + chunk], P, length)
         num[i:i + chunk], den[i:i + chunk] = K @ r2, K.sum(1)
     v = (num + pseudo * mean) / (den + pseudo)
     return np.maximum(np.sqrt(v / v.mean()), floor)
@@ -143,9 +142,15 @@ def weighted_prior(prior, fit: ModelFit, X: np.ndarray, surface, normals_of, h: 
     :mod:`.detailprior` (``prior`` a :class:`.detailprior.DetailPrior`, unchanged; the other arguments as
     :func:`fit_residual_weights`')."""
     w = fit_residual_weights(fit, X, surface, normals_of, h, options, prior.length)
+    return scaled_prior(prior, w), w
+
+
+def scaled_prior(prior, w: np.ndarray):
+    """A copy of the field's basis prior (a :class:`.detailprior.DetailPrior`, unchanged) with its functions scaled
+    by ``w`` (n,): the covariance ``s^2 w(x) w(y) k(x, y)``."""
     out = copy.copy(prior)
     out.phi = prior.phi * w[None]
-    return out, w
+    return out
 
 
 def split_rounds(iterations: int, field: bool = True) -> tuple[int, int]:
@@ -170,9 +175,7 @@ def refit_on_field(fit: ModelFit, prior, fit_with_detail, args: tuple, options: 
     """
     base, deltas, surface, normals_of, h, s = args
     w = field_weights(fit, base, deltas, normals_of, prior.length)
-    out = copy.copy(prior)
-    out.phi = prior.phi * w[None]
-    return fit_with_detail(fit, out, *args, options, start=fit, field_normals=field_normals), w  # iterations: both fits'
+    return fit_with_detail(fit, scaled_prior(prior, w), *args, options, start=fit, field_normals=field_normals), w  # iterations: both fits'
 
 
 def field_weights(fit: ModelFit, base: np.ndarray, deltas: np.ndarray, normals_of, length: float) -> np.ndarray:
@@ -192,4 +195,4 @@ def field_weights(fit: ModelFit, base: np.ndarray, deltas: np.ndarray, normals_o
 
 
 __all__ = ["AMPLITUDE_MAPS", "FLOOR", "PSEUDO", "SAMPLES", "ROUNDS", "field_weights", "fit_residual_weights", "refit_on_field",
-           "residual_weights", "split_rounds", "weighted_prior"]
+           "residual_weights", "scaled_prior", "split_rounds", "weighted_prior"]

@@ -49,6 +49,13 @@ REACH = 3.0
 NUGGET_FLOOR = 1e-3
 
 
+def se_kernel(A: np.ndarray, B: np.ndarray, length: float) -> np.ndarray:
+    """``k(a, b) = exp(-|a - b|^2 / (2 l^2))`` (len(A), len(B)): the detail field's squared-exponential covariance in
+    3D, shared by its basis (eq. D3 of :mod:`.detailprior`), its amplitude map (eq. D5 of :mod:`.fieldamplitude`) and
+    the extension here (eq. U1)."""
+    return np.exp(-cdist(A, B, "sqeuclidean") / (2.0 * length ** 2))
+
+
 def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, seen: np.ndarray,
                          unseen: np.ndarray, length: float, noise_ratio: float, samples: int = 2000,
                          seed: int = 0, weights: np.ndarray | None = None) -> np.ndarray:
@@ -80,10 +87,10 @@ def extend_normal_offset(X: np.ndarray, base: np.ndarray, normals: np.ndarray, s
         a = np.sort(np.random.default_rng(seed).choice(a, samples, replace=False))
     f = ((X[a] - base[a]) * normals[a]).sum(1)
     w = np.ones(len(X)) if weights is None else np.asarray(weights, float)
-    K = np.exp(-cdist(base[a], base[a], "sqeuclidean") / (2.0 * length ** 2)) * np.outer(w[a], w[a])
+    K = se_kernel(base[a], base[a], length) * np.outer(w[a], w[a])
     K[np.diag_indices_from(K)] += max(noise_ratio, NUGGET_FLOOR)
     alpha = cho_solve(cho_factor(K), f)
-    fu = w[u] * (np.exp(-cdist(base[u], base[a], "sqeuclidean") / (2.0 * length ** 2)) @ (w[a] * alpha))
+    fu = w[u] * (se_kernel(base[u], base[a], length) @ (w[a] * alpha))
     Y = X.copy()
     Y[u] = base[u] + fu[:, None] * normals[u]
     return Y
@@ -127,4 +134,4 @@ def extend_unseen(reg, fit, res, surface, identity_fit: bool):
     return dataclasses.replace(res, vertices=X, distance=dist)
 
 
-__all__ = ["NUGGET_FLOOR", "REACH", "extend_normal_offset", "extend_unseen"]
+__all__ = ["NUGGET_FLOOR", "REACH", "extend_normal_offset", "extend_unseen", "se_kernel"]

@@ -417,7 +417,7 @@ def identity_fit_with_detail(reg, plain: ModelFit, P: np.ndarray, surface, h: fl
         fit = dataclasses.replace(fit, detail_noise=choice.noise if choice is not None else 0.0, detail_weights=w)
     if reg.skin is None or fit is plain:
         return fit
-    X = fit.pose.apply(P + (fit.coefficients @ D.reshape(len(D), -1)).reshape(P.shape))
+    X = fit.pose.apply(P + DenseBasis(D).combine(fit.coefficients))
     X[reg.skin] = fit.vertices
     return dataclasses.replace(fit, vertices=X)
 

@@ -78,7 +78,7 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from .shapemodel import ModelFit, ModelFitOptions, _pairs
+from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, _pairs
 from .unseen import se_kernel
 
 #: the pseudo-count ``c`` of eq. D5: the local variance falls back to the mean where the kernel weights of the
@@ -188,8 +188,7 @@ def field_weights(fit: ModelFit, base: np.ndarray, deltas: np.ndarray, normals_o
     deltas : (K, n, 3) the modes on the part; normals_of : unit vertex normals ``(n, 3) -> (n, 3)``
     length : the field's length ``l`` (template units; times the fit's scale)
     """
-    K = len(deltas)
-    M = fit.pose.apply(base + (fit.coefficients[:K] @ deltas.reshape(K, -1)).reshape(base.shape))
+    M = fit.pose.apply(base + DenseBasis(deltas).combine(fit.coefficients[:len(deltas)]))
     f = ((fit.vertices - M) * normals_of(M)).sum(1)
     return residual_weights(M, np.arange(len(M)), f, length * fit.pose.scale)
 

@@ -35,7 +35,7 @@ import dataclasses
 
 import numpy as np
 
-from .shapemodel import ModelFit, ModelFitOptions, fit_shape_model
+from .shapemodel import DenseBasis, ModelFit, ModelFitOptions, fit_shape_model
 
 
 def person_normals(base: np.ndarray, deltas: np.ndarray, coefficients: np.ndarray, normals_of) -> np.ndarray:
@@ -47,8 +47,7 @@ def person_normals(base: np.ndarray, deltas: np.ndarray, coefficients: np.ndarra
     coefficients : (K,) ``c``
     normals_of : unit vertex normals ``(n, 3) -> (n, 3)`` of the topology
     """
-    K = len(deltas)
-    return normals_of(base + (np.asarray(coefficients)[:K] @ deltas.reshape(K, -1)).reshape(base.shape))
+    return normals_of(base + DenseBasis(deltas).combine(np.asarray(coefficients)[:len(deltas)]))
 
 
 def fit_along_person_normals(base: np.ndarray, deltas: np.ndarray, basis_along, normals: np.ndarray, surface,

@@ -113,8 +113,9 @@ def extend_unseen(reg, fit, res, surface, identity_fit: bool):
     noise_ratio = (fit.rms / fit.detail_sd) ** 2
     if not np.isfinite(noise_ratio):  # the fit kept no pairs: nothing seen to extend
         return res
-    D = reg.identity.deltas
-    base = fit.pose.apply(reg.V + (fit.coefficients @ D.reshape(len(D), -1)).reshape(reg.V.shape))
+    from .shapemodel import DenseBasis
+
+    base = fit.pose.apply(reg.V + DenseBasis(reg.identity.deltas).combine(fit.coefficients))
     unseen = res.no_surface.copy()
     if reg.skin is not None:  # the other parts (eyeballs, teeth) stay where the fit put them
         unseen[:] = False

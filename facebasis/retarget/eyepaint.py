@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mouth2d import feature_frame
+from .mouth2d import blend_pixels, feature_frame
 
 #: the two eyes of the 68-point iBUG set: corner, upper lid (2), corner, lower lid (2) in polygon order
 EYES_68 = (np.array([36, 37, 38, 39, 40, 41]), np.array([42, 43, 44, 45, 46, 47]))
@@ -168,7 +168,6 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
     pad = rows * REMAP_ROW - len(sx)
     sx, sy = (np.pad(m, (0, pad), mode="edge").reshape(rows, REMAP_ROW) for m in (sx, sy))
     src = cv2.remap(source, sx, sy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    C = image.shape[2] if image.ndim == 3 else 1
     src = src.reshape(rows * REMAP_ROW, -1)[: len(ys)].astype(np.float32)[:, :3]
     if src.shape[1] == 1:
         src = np.repeat(src, 3, 1)
@@ -179,15 +178,7 @@ def paint_eye(image, source, eye, rest_eye, colours, closure: float | None = Non
     col = src * (1 - a_lid) + lid * a_lid
     col = col * (1 - a_low) + under * a_low
     col = col * (1 - a_lash) + lash * a_lash
-    a = (mask[ys, xs].astype(np.float32) * (alpha / 255.0))[:, None] * a_top
-    if image.ndim == 2:
-        image = image[..., None]
-    if C == 4:
-        col = np.concatenate([col, np.full((len(ys), 1), 255, np.float32)], -1)
-    elif C == 1:
-        col = (col @ np.float32([0.299, 0.587, 0.114]))[:, None]
-    box = image[y0:y1, x0:x1]
-    box[ys, xs] = np.clip(np.rint(box[ys, xs].astype(np.float32) * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
+    blend_pixels(image, x0, y0, ys, xs, col, (mask[ys, xs].astype(np.float32) * (alpha / 255.0))[:, None] * a_top)
 
 
 __all__ = ["EYES_68", "CLOSURE_FULL", "LASH_WIDTH", "LID_MARGIN", "LID_BAND", "eye_frame", "lid_curves", "eye_opening",

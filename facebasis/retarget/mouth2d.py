@@ -103,8 +103,6 @@ def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
     P = np.asarray(polygon, np.float64)
     if polygon_area(P) <= MIN_OPEN_AREA or opacity * 255.0 < 1.0:
         return
-    if image.ndim == 2:
-        image = image[..., None]                     # a view: writes go to the caller's array
     H, W = image.shape[:2]
     x0, y0 = np.maximum(np.floor(P.min(0)).astype(int) - 1, 0)
     x1, y1 = np.minimum(np.ceil(P.max(0)).astype(int) + 2, [W, H])
@@ -120,10 +118,19 @@ def blend_polygon(image, polygon, colours, opacity: float = 1.0) -> None:
         rgb = np.asarray(colours(xs + x0, ys + y0), np.float32)
     else:
         rgb = np.broadcast_to(np.asarray(tuple(colours)[:3], np.float32), (len(ys), 3))
+    blend_pixels(image, x0, y0, ys, xs, rgb, a)
+
+
+def blend_pixels(image, x0: int, y0: int, ys, xs, rgb, a) -> None:
+    """Blend the pixels ``(y0 + ys, x0 + xs)`` (n,) of ``image`` (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8 in
+    place towards ``rgb`` (n, 3) float32 with opacities ``a`` (n, 1): a grey image gets the colours' luma, an alpha
+    channel is made opaque (:func:`blend_polygon`, :func:`.eyepaint.paint_eye`)."""
+    if image.ndim == 2:
+        image = image[..., None]                     # a view: writes go to the caller's array
     C = image.shape[2]
     col = np.concatenate([rgb, np.full((len(ys), 1), 255, np.float32)], -1) if C == 4 else rgb if C == 3 \
         else (rgb @ np.float32([0.299, 0.587, 0.114]))[:, None]
-    box = image[y0:y1, x0:x1]                        # a view: writes go to the caller's array
+    box = image[y0:, x0:]                            # a view: writes go to the caller's array
     box[ys, xs] = np.clip(np.rint(box[ys, xs].astype(np.float32) * (1.0 - a) + col * a), 0, 255).astype(np.uint8)
 
 
@@ -134,5 +141,5 @@ def fill_mouth(image, inner_lip, colour=MOUTH_INTERIOR_RGB, opacity: float = 1.0
     blend_polygon(image, inner_lip, colour, opacity)
 
 
-__all__ = ["INNER_LIP_68", "MOUTH_INTERIOR_RGB", "MOUTH_STRIP_68", "MIN_OPEN_AREA", "mouth_is_cut", "polygon_area",
+__all__ = ["INNER_LIP_68", "MOUTH_INTERIOR_RGB", "MOUTH_STRIP_68", "MIN_OPEN_AREA", "mouth_is_cut", "polygon_area", "blend_pixels",
            "opening_opacity", "blend_polygon", "fill_mouth"]
